@@ -1,0 +1,55 @@
+// Brick: the unit of output and transfer, an 8x8x8 block of distances (like an OpenVDB leaf / nvblox block).
+// Contract: `origin` is a multiple of 8 in index space. Values are world-unit distances, negative inside when
+// the field is signed. Voxel (x,y,z) of the grid lives in the brick with origin (x&~7, y&~7, z&~7) at
+// offset brickOffset(x&7, y&7, z&7) = (x<<6)|(y<<3)|z — OpenVDB's LeafNode order (z fastest).
+// `mask` marks the voxels that this brick message delivers; other values are unspecified.
+// Plain value type; no internal synchronisation.
+#pragma once
+
+#include <array>
+#include <bit>
+#include <cstdint>
+#include <vector>
+
+#include "core/grid.h"
+#include "core/types.h"
+
+namespace distband {
+
+inline constexpr int brickOffset(int lx, int ly, int lz) { return (lx << 6) | (ly << 3) | lz; }
+inline constexpr Coord brickLocal(int offset) { return {offset >> 6, (offset >> 3) & 7, offset & 7}; }
+
+/// 512-bit voxel mask of a brick, bit i = voxel at offset i (64 bytes on the wire, little-endian words).
+struct BrickMask {
+  std::array<uint64_t, kBrickVoxels / 64> words{};
+  void set(int i) { words[i >> 6] |= uint64_t(1) << (i & 63); }
+  bool test(int i) const { return (words[i >> 6] >> (i & 63)) & 1; }
+  int count() const {
+    int n = 0;
+    for (uint64_t w : words) n += std::popcount(w);
+    return n;
+  }
+  bool empty() const {
+    for (uint64_t w : words)
+      if (w) return false;
+    return true;
+  }
+};
+
+struct Brick {
+  Coord origin;
+  std::array<float, kBrickVoxels> values{};
+  BrickMask mask;
+};
+
+/// The bricks finished by one segment of the propagation, delivered nearest-first. Every voxel within the
+/// limit is delivered exactly once over a run, in the segment whose range holds its |distance|.
+struct SegmentBricks {
+  int index = 0;               ///< 0-based segment number
+  double lower_world = 0;      ///< |distance| range of the voxels delivered: (lower, upper]; segment 0 includes 0
+  double upper_world = 0;
+  bool last = false;           ///< true for the final segment of a completed run
+  std::vector<Brick> bricks;   ///< sorted by origin (z, y, x), one entry per brick with delivered voxels
+};
+
+}  // namespace distband

@@ -1,0 +1,33 @@
+// DenseField: a dense float array assembled from delivered bricks (for .npy output, tests and small grids).
+// Contract: starts filled with `background`; add() copies the masked voxels of a brick that fall inside the grid.
+// Layout x-fastest ([z][y][x] in C order), matching Grid::denseIndex. Not thread-safe.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/brick.h"
+#include "core/grid.h"
+
+namespace distband {
+
+class DenseField {
+ public:
+  DenseField(const Grid& grid, float background);
+  void add(const Brick& brick);
+  void add(const SegmentBricks& segment) {
+    for (const Brick& b : segment.bricks) add(b);
+  }
+  const Grid& grid() const { return grid_; }
+  float at(const Coord& c) const { return values_[grid_.denseIndex(c)]; }
+  const std::vector<float>& values() const { return values_; }
+  std::vector<float>& values() { return values_; }
+  int64_t written() const { return written_; }  ///< voxels written by add(), counting repeats
+
+ private:
+  Grid grid_;
+  std::vector<float> values_;
+  int64_t written_ = 0;
+};
+
+}  // namespace distband

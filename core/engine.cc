@@ -1,0 +1,631 @@
+// The active-band engine. See engine.h for the contract and docs/algorithm.md for the method.
+//
+// Per voxel the band stores one 64-bit key = (float squared distance in voxels) << 32 | site id. Positive floats
+// order like their bit patterns, so "better site" is an integer minimum and one atomic CAS updates distance and
+// site together; ties go to the lower site id, which keeps the result independent of thread scheduling.
+//
+// A step is Jacobi-like: every voxel that changed in the previous step offers the site it held at the end of that
+// step (snapshotted in the front list) to its stencil neighbours; neighbours keep the minimum. Pushes from voxels
+// that did not change would repeat offers already made, so only changed voxels work (the paper's band iteration
+// gives the same field; the lifespan then only decides when a voxel stops accepting offers).
+#include "core/engine.h"
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
+
+#include "core/geometry.h"
+
+namespace distband {
+
+std::string_view modeName(PropagationMode mode) { return mode == PropagationMode::kPaper ? "paper" : "exact"; }
+
+bool parseMode(std::string_view name, PropagationMode* mode) {
+  if (name == "paper") *mode = PropagationMode::kPaper;
+  else if (name == "exact") *mode = PropagationMode::kExact;
+  else return false;
+  return true;
+}
+
+int defaultLifespanMargin(StencilKind stencil) {
+  // The paper's t_min/t_max bounds hold for arrival times counted from the site; our clock starts at the initial
+  // band, up to ~1 voxel (1–2 steps) off the site. See docs/algorithm.md and the lifespan tests.
+  switch (stencil) {
+    case StencilKind::kCubic6: return 3;
+    case StencilKind::kCubic18: return 2;
+    case StencilKind::kCubic26: return 2;
+    case StencilKind::kFcc12: return 2;
+  }
+  return 2;
+}
+
+std::string validateOptions(const Grid& grid, const EngineOptions& o) {
+  if (std::string e = grid.validate(); !e.empty()) return "grid: " + e;
+  if (!(o.segment_length_world >= 0) || std::isinf(o.segment_length_world))
+    return fmt::format("segment_length must be finite and >= 0 (got {})", o.segment_length_world);
+  if (!(o.limit_world > 0)) return fmt::format("limit must be > 0 (got {})", o.limit_world);
+  if (o.threads < 0 || o.threads > 4096) return fmt::format("threads must be in [0, 4096] (got {})", o.threads);
+  if (std::isnan(o.lifespan_alpha)) return "lifespan_alpha must not be NaN";
+  if (o.lifespan_margin > 1000) return "lifespan_margin must be <= 1000";
+  if (o.segment_length_world > 0 && std::isfinite(o.limit_world) &&
+      o.limit_world / o.segment_length_world > 100000)
+    return "limit / segment_length must be <= 100000 segments";
+  return {};
+}
+
+namespace {
+
+constexpr uint64_t kUntouched = ~uint64_t(0);
+constexpr uint16_t kNeverExpires = 0xFFFF;
+constexpr uint16_t kNoStamp = 0xFFFF;
+constexpr int kMaxSteps = 65000;  // expiry and stamps are 16-bit step numbers
+constexpr uint8_t kMarked = 1;    // saw two different sites: a Voronoi-boundary candidate for the correction
+constexpr uint8_t kEmitted = 2;
+
+inline uint64_t packKey(float d2, uint32_t site) { return (uint64_t(std::bit_cast<uint32_t>(d2)) << 32) | site; }
+inline float keyDist2(uint64_t k) { return std::bit_cast<float>(uint32_t(k >> 32)); }
+inline uint32_t keySite(uint64_t k) { return uint32_t(k); }
+
+struct BrickState {
+  explicit BrickState(Coord o) : origin(o) {
+    for (int i = 0; i < kBrickVoxels; ++i) {
+      key[i].store(kUntouched, std::memory_order_relaxed);
+      expiry[i].store(kNeverExpires, std::memory_order_relaxed);
+      stamp[i].store(kNoStamp, std::memory_order_relaxed);
+      flags[i].store(0, std::memory_order_relaxed);
+    }
+  }
+  Coord origin;
+  std::atomic<bool> pending{false};  // listed for emission (holds touched, not yet emitted voxels)
+  std::atomic<uint64_t> key[kBrickVoxels];
+  std::atomic<uint16_t> expiry[kBrickVoxels];  // last step in which the voxel accepts offers (paper mode)
+  std::atomic<uint16_t> stamp[kBrickVoxels];   // last step in which the voxel changed
+  std::atomic<uint8_t> flags[kBrickVoxels];
+};
+
+struct VoxelRef {
+  uint32_t brick;
+  uint16_t offset;
+};
+
+struct FrontEntry {
+  uint32_t brick;
+  uint16_t offset;
+  uint32_t site;
+};
+
+struct ThreadBuffers {
+  std::vector<FrontEntry> next;       // voxels changed in this step (site filled in after the step)
+  std::vector<VoxelRef> deferred;     // pushers with an offer beyond the segment threshold
+  std::vector<VoxelRef> marked;       // newly marked Voronoi-boundary candidates
+  std::vector<uint32_t> pending;      // bricks that got their first unemitted voxel
+  std::vector<BrickState*> allocated;
+  std::vector<std::pair<VoxelRef, uint64_t>> corrections;
+  int64_t updates = 0;
+};
+
+struct SiteMetric {
+  const Seeds& seeds;
+  // Squared distance in voxels from voxel (x,y,z) to a site, in double (the emitted value) ...
+  double dist2(uint32_t site, double x, double y, double z) const {
+    if (site == kNoSite) return 0.0;
+    const Vec3d p{x, y, z};
+    if (seeds.kind == SiteKind::kPoint) return (p - seeds.points[site]).lengthSqr();
+    const auto& t = seeds.triangles[site];
+    return pointTriangleDistanceSqr(p, t[0], t[1], t[2]);
+  }
+  // ... and rounded to float for the key.
+  float key2(uint32_t site, double x, double y, double z) const { return float(dist2(site, x, y, z)); }
+};
+
+class BandRun {
+ public:
+  BandRun(const Grid& grid, const Seeds& seeds, const EngineOptions& opt, const SegmentCallback& cb)
+      : grid_(grid),
+        seeds_(seeds),
+        opt_(opt),
+        cb_(cb),
+        stencil_(Stencil::get(opt.stencil)),
+        metric_{seeds},
+        dims_(grid.dims()),
+        bdims_(grid.brickDims()),
+        table_(size_t(bdims_.x) * bdims_.y * bdims_.z),
+        region_(seeds.region ? seeds.region->data() : nullptr) {
+    for (auto& p : table_) p.store(nullptr, std::memory_order_relaxed);
+    for (const Coord& l : stencil_.links) links_.push_back({l.x, l.y, l.z, l.x * 64 + l.y * 8 + l.z, !stencil_.fcc});
+    if (opt.mode == PropagationMode::kPaper) {
+      alpha_ = opt.lifespan_alpha < 0 ? stencil_.alpha : opt.lifespan_alpha;
+      margin_ = opt.lifespan_margin < 0 ? defaultLifespanMargin(opt.stencil) : opt.lifespan_margin;
+      use_lifespan_ = std::isfinite(alpha_);
+    }
+    const double h = grid.voxelSize();
+    limit_vox_ = opt.limit_world / h;
+    segment_vox_ = opt.segment_length_world / h;
+  }
+
+  ~BandRun() {
+    for (auto& p : table_) delete p.load(std::memory_order_relaxed);
+  }
+
+  EngineResult run();
+
+ private:
+  uint32_t brickIndex(int x, int y, int z) const {
+    return uint32_t(((z >> kBrickLog2) * bdims_.y + (y >> kBrickLog2)) * bdims_.x + (x >> kBrickLog2));
+  }
+  Coord brickOrigin(uint32_t bi) const {
+    const int bx = int(bi % bdims_.x), by = int((bi / bdims_.x) % bdims_.y), bz = int(bi / (bdims_.x * bdims_.y));
+    return {bx << kBrickLog2, by << kBrickLog2, bz << kBrickLog2};
+  }
+  uint8_t regionOf(const Coord& c) const { return region_ ? region_[grid_.denseIndex(c)] : 0; }
+
+  BrickState* getOrCreate(uint32_t bi, ThreadBuffers& tb) {
+    BrickState* b = table_[bi].load(std::memory_order_acquire);
+    if (b) return b;
+    auto* fresh = new BrickState(brickOrigin(bi));
+    if (table_[bi].compare_exchange_strong(b, fresh, std::memory_order_acq_rel)) {
+      tb.allocated.push_back(fresh);
+      return fresh;
+    }
+    delete fresh;
+    return b;
+  }
+
+  void mark(BrickState* b, uint32_t bi, int off, ThreadBuffers& tb) {
+    if (!(b->flags[off].load(std::memory_order_relaxed) & kMarked) &&
+        !(b->flags[off].fetch_or(kMarked, std::memory_order_relaxed) & kMarked))
+      tb.marked.push_back({bi, uint16_t(off)});
+  }
+
+  // Offers `newkey` to voxel (b, off). Returns true when it lowered the voxel's key.
+  bool offer(BrickState* b, uint32_t bi, int off, uint64_t newkey, bool propagates, ThreadBuffers& tb) {
+    uint64_t k = b->key[off].load(std::memory_order_relaxed);
+    while (newkey < k) {
+      if (b->key[off].compare_exchange_weak(k, newkey, std::memory_order_relaxed)) {
+        ++tb.updates;
+        if (k == kUntouched) {
+          if (use_lifespan_) {
+            const double t_local = double(step_ - segment_start_step_);
+            const double exp = double(step_) + std::ceil(alpha_ * t_local) + margin_;
+            b->expiry[off].store(uint16_t(std::min(exp, double(kMaxSteps))), std::memory_order_relaxed);
+          }
+          if (!b->pending.load(std::memory_order_relaxed) && !b->pending.exchange(true)) tb.pending.push_back(bi);
+        } else if (track_marks_ && keySite(k) != keySite(newkey)) {
+          mark(b, bi, off, tb);
+        }
+        if (propagates && b->stamp[off].exchange(uint16_t(step_), std::memory_order_relaxed) != uint16_t(step_))
+          tb.next.push_back({bi, uint16_t(off), 0});
+        return true;
+      }
+    }
+    return false;
+  }
+
+  void pushFrom(const FrontEntry& e, ThreadBuffers& tb);
+  template <bool kInterior, bool kPoints>
+  void pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb);
+  void insertBand();
+  void step(std::vector<FrontEntry>& front);
+  std::vector<FrontEntry> correct();
+  void emitSegment(int index, double lower_vox, double upper_vox, bool last, SegmentStats& stats);
+
+  const Grid& grid_;
+  const Seeds& seeds_;
+  const EngineOptions& opt_;
+  const SegmentCallback& cb_;
+  const Stencil& stencil_;
+  SiteMetric metric_;
+  Coord dims_, bdims_;
+  std::vector<std::atomic<BrickState*>> table_;
+  const uint8_t* region_;
+  struct Link {
+    int x, y, z, offset;
+    bool propagates_to;  // true when the target always propagates (every cubic stencil)
+  };
+  std::vector<Link> links_;
+  double alpha_ = 0;
+  int margin_ = 0;
+  bool use_lifespan_ = false;
+  bool track_marks_ = false;
+  double limit_vox_ = 0, segment_vox_ = 0;
+
+  int step_ = 0;
+  int segment_start_step_ = 0;
+  float thr2_ = 0;       // offers beyond this squared distance wait for a later segment
+  float frozen2_ = -1;   // voxels at or below this squared distance are final (delivered)
+  bool thr_is_limit_ = false;
+
+  tbb::enumerable_thread_specific<ThreadBuffers> buffers_;
+  std::vector<uint32_t> pending_bricks_;
+  std::vector<VoxelRef> marked_;
+  std::vector<VoxelRef> deferred_;
+  int64_t corrections_ = 0;
+};
+
+void BandRun::pushFrom(const FrontEntry& e, ThreadBuffers& tb) {
+  BrickState* pb = table_[e.brick].load(std::memory_order_relaxed);
+  const Coord l = brickLocal(e.offset);
+  // Fast path: every neighbour lies in this brick, which lies wholly inside the grid.
+  const bool interior = l.x >= 1 && l.x <= 6 && l.y >= 1 && l.y <= 6 && l.z >= 1 && l.z <= 6 &&
+                        pb->origin.x + kBrickSize <= dims_.x && pb->origin.y + kBrickSize <= dims_.y &&
+                        pb->origin.z + kBrickSize <= dims_.z;
+  const bool points = seeds_.kind == SiteKind::kPoint;
+  if (interior) {
+    if (points) pushFromT<true, true>(e, pb, tb);
+    else pushFromT<true, false>(e, pb, tb);
+  } else {
+    if (points) pushFromT<false, true>(e, pb, tb);
+    else pushFromT<false, false>(e, pb, tb);
+  }
+}
+
+template <bool kInterior, bool kPoints>
+void BandRun::pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb) {
+  // Members copied to locals: the atomics and buffer writes below would otherwise force reloads every link.
+  const Coord p = pb->origin + brickLocal(e.offset);
+  const uint32_t site = e.site;
+  const uint8_t* const region_map = region_;
+  const uint8_t region = regionOf(p);
+  const uint32_t dx = uint32_t(dims_.x), dy = uint32_t(dims_.y), dz = uint32_t(dims_.z);
+  const float thr2 = thr2_, frozen2 = frozen2_;
+  const bool track = track_marks_, lifespan = use_lifespan_, thr_is_limit = thr_is_limit_;
+  const int step = step_;
+  // Point sites: the offset from the site to p, so a neighbour's squared distance is three multiply-adds.
+  Vec3d rel{};
+  if constexpr (kPoints) rel = Vec3d{double(p.x), double(p.y), double(p.z)} - seeds_.points[site];
+  bool deferred = false;
+  const Link* const links = links_.data();
+  const size_t n = links_.size();
+  for (size_t li = 0; li < n; ++li) {
+    const Link& d = links[li];
+    const Coord g{p.x + d.x, p.y + d.y, p.z + d.z};
+    BrickState* gb;
+    uint32_t gbi;
+    int goff;
+    if constexpr (kInterior) {
+      gb = pb;
+      gbi = e.brick;
+      goff = e.offset + d.offset;
+    } else {
+      if (uint32_t(g.x) >= dx || uint32_t(g.y) >= dy || uint32_t(g.z) >= dz) continue;
+      gbi = brickIndex(g.x, g.y, g.z);
+      gb = table_[gbi].load(std::memory_order_acquire);
+      goff = brickOffset(g.x & 7, g.y & 7, g.z & 7);
+    }
+    if (region_map && region_map[grid_.denseIndex(g)] != region) continue;
+    const uint64_t k = gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched;
+    // The same site gives the same distance: nothing to offer and no boundary here.
+    if (k != kUntouched && keySite(k) == site) continue;
+    float d2;
+    if constexpr (kPoints) {
+      const double x = rel.x + d.x, y = rel.y + d.y, z = rel.z + d.z;
+      d2 = float(x * x + y * y + z * z);
+    } else {
+      d2 = metric_.key2(site, g.x, g.y, g.z);
+    }
+    const uint64_t newkey = packKey(d2, site);
+    if (k != kUntouched) {
+      if (keyDist2(k) <= frozen2) {  // final: delivered in an earlier segment
+        if (track) mark(pb, e.brick, e.offset, tb);
+        continue;
+      }
+      if (newkey >= k) {
+        if (track) {
+          mark(pb, e.brick, e.offset, tb);
+          mark(gb, gbi, goff, tb);
+        }
+        continue;
+      }
+      if (lifespan && step > gb->expiry[goff].load(std::memory_order_relaxed)) continue;  // FINISHED
+    }
+    if (d2 > thr2) {
+      if (!thr_is_limit) deferred = true;
+      continue;
+    }
+    if (!gb) gb = getOrCreate(gbi, tb);
+    if (!offer(gb, gbi, goff, newkey, d.propagates_to || stencil_.propagates(g), tb) && track &&
+        keySite(gb->key[goff].load(std::memory_order_relaxed)) != site) {
+      // Lost a race to a better, different site offered in this very step.
+      mark(pb, e.brick, e.offset, tb);
+      mark(gb, gbi, goff, tb);
+    }
+  }
+  if (deferred) tb.deferred.push_back({e.brick, e.offset});
+}
+
+void BandRun::insertBand() {
+  const auto& band = seeds_.band;
+  const float limit2 = std::isfinite(limit_vox_) ? float(limit_vox_ * limit_vox_) : INFINITY;
+  for (const BandVoxel& v : band) {
+    if (!grid_.contains(v.voxel))
+      throw std::invalid_argument(fmt::format("band voxel ({},{},{}) lies outside the grid", v.voxel.x, v.voxel.y,
+                                              v.voxel.z));
+    if (v.site != kNoSite && v.site >= seeds_.siteCount())
+      throw std::invalid_argument(fmt::format("band voxel names site {} of {}", v.site, seeds_.siteCount()));
+  }
+  step_ = 0;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    ThreadBuffers& tb = buffers_.local();
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const BandVoxel& v = band[i];
+      const float d2 = metric_.key2(v.site, v.voxel.x, v.voxel.y, v.voxel.z);
+      if (d2 > limit2) continue;
+      const uint32_t bi = brickIndex(v.voxel.x, v.voxel.y, v.voxel.z);
+      BrickState* b = getOrCreate(bi, tb);
+      const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
+      // Band voxels are first touched at step 0; kNoSite voxels (distance 0, nothing to offer) never push.
+      offer(b, bi, off, packKey(d2, v.site), v.site != kNoSite, tb);
+    }
+  });
+}
+
+void BandRun::step(std::vector<FrontEntry>& front) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+    ThreadBuffers& tb = buffers_.local();
+    for (size_t i = r.begin(); i != r.end(); ++i) pushFrom(front[i], tb);
+  });
+}
+
+// The second-ring correction (exact mode). A voxel whose true closest site is held by none of its stencil
+// neighbours can only sit where different sites meet; such voxels were marked when two sites met there. Each one
+// still inside the current segment tries every site held within Chebyshev distance 2. Only voxels with a
+// propagating neighbour of a different site are checked: that set is decided by the field alone (marking
+// guarantees it is a subset of the marked voxels), so the result does not depend on thread timing.
+std::vector<FrontEntry> BandRun::correct() {
+  for (auto& tb : buffers_) {
+    marked_.insert(marked_.end(), tb.marked.begin(), tb.marked.end());
+    tb.marked.clear();
+  }
+  // Drop voxels already delivered; keep the rest (those beyond the threshold wait for their segment).
+  std::erase_if(marked_, [&](const VoxelRef& v) {
+    BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
+    return keyDist2(b->key[v.offset].load(std::memory_order_relaxed)) <= frozen2_;
+  });
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, marked_.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
+    ThreadBuffers& tb = buffers_.local();
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const VoxelRef v = marked_[i];
+      BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
+      const uint64_t k = b->key[v.offset].load(std::memory_order_relaxed);
+      if (keyDist2(k) > thr2_ || keySite(k) == kNoSite) continue;
+      const Coord q = b->origin + brickLocal(v.offset);
+      const uint8_t region = regionOf(q);
+      auto siteAt = [&](const Coord& c, uint64_t* out) {
+        if (!grid_.contains(c) || (region_ && regionOf(c) != region)) return false;
+        BrickState* nb = table_[brickIndex(c.x, c.y, c.z)].load(std::memory_order_relaxed);
+        if (!nb) return false;
+        *out = nb->key[brickOffset(c.x & 7, c.y & 7, c.z & 7)].load(std::memory_order_relaxed);
+        return *out != kUntouched && keySite(*out) != kNoSite;
+      };
+      bool boundary = false;
+      for (const Coord& d : stencil_.links) {
+        const Coord n{q.x - d.x, q.y - d.y, q.z - d.z};
+        uint64_t nk;
+        if (stencil_.propagates(n) && siteAt(n, &nk) && keySite(nk) != keySite(k)) {
+          boundary = true;
+          break;
+        }
+      }
+      if (!boundary) continue;
+      uint64_t best = k;
+      uint32_t last_site = keySite(k);
+      for (int dz = -2; dz <= 2; ++dz)
+        for (int dy = -2; dy <= 2; ++dy)
+          for (int dx = -2; dx <= 2; ++dx) {
+            uint64_t nk;
+            if (!siteAt({q.x + dx, q.y + dy, q.z + dz}, &nk)) continue;
+            const uint32_t s = keySite(nk);
+            if (s == last_site) continue;
+            last_site = s;
+            const uint64_t cand = packKey(metric_.key2(s, q.x, q.y, q.z), s);
+            if (cand < best) best = cand;
+          }
+      if (best < k) tb.corrections.push_back({v, best});
+    }
+  });
+  std::vector<FrontEntry> front;
+  for (auto& tb : buffers_) {
+    for (const auto& [v, key] : tb.corrections) {
+      BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
+      b->key[v.offset].store(key, std::memory_order_relaxed);
+      b->stamp[v.offset].store(uint16_t(step_), std::memory_order_relaxed);
+      ++corrections_;
+      if (stencil_.propagates(b->origin + brickLocal(v.offset))) front.push_back({v.brick, v.offset, keySite(key)});
+    }
+    tb.corrections.clear();
+  }
+  return front;
+}
+
+void BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool last, SegmentStats& stats) {
+  for (auto& tb : buffers_) {
+    pending_bricks_.insert(pending_bricks_.end(), tb.pending.begin(), tb.pending.end());
+    tb.pending.clear();
+  }
+  const double h = grid_.voxelSize();
+  std::vector<Brick> out(pending_bricks_.size());
+  std::vector<uint8_t> keep(pending_bricks_.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pending_bricks_.size(), 16),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      uint32_t sites[kBrickVoxels];
+                      for (size_t i = r.begin(); i != r.end(); ++i) {
+                        BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
+                        Brick& brick = out[i];
+                        brick.origin = b->origin;
+                        bool remaining = false;
+                        for (int off = 0; off < kBrickVoxels; ++off) {
+                          const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+                          sites[off] = kNoSite;
+                          if (k == kUntouched) continue;
+                          const uint8_t f = b->flags[off].load(std::memory_order_relaxed);
+                          if (f & kEmitted) continue;
+                          if (keyDist2(k) > thr2_) {
+                            remaining = true;
+                            continue;
+                          }
+                          const Coord c = b->origin + brickLocal(off);
+                          const uint32_t s = keySite(k);
+                          sites[off] = s;
+                          brick.values[off] = float(std::sqrt(metric_.dist2(s, c.x, c.y, c.z)) * h);
+                          brick.mask.set(off);
+                          b->flags[off].store(f | kEmitted, std::memory_order_relaxed);
+                        }
+                        if (!remaining) b->pending.store(false, std::memory_order_relaxed);
+                        keep[i] = remaining;
+                        if (seeds_.sign && !brick.mask.empty()) seeds_.sign(brick, sites);
+                      }
+                    });
+  SegmentBricks seg;
+  seg.index = index;
+  seg.lower_world = lower_vox * h;
+  seg.upper_world = upper_vox * h;
+  seg.last = last;
+  for (size_t i = 0; i < out.size(); ++i) {
+    if (out[i].mask.empty()) continue;
+    stats.voxels += out[i].mask.count();
+    seg.bricks.push_back(std::move(out[i]));
+  }
+  std::sort(seg.bricks.begin(), seg.bricks.end(), [](const Brick& a, const Brick& b) {
+    return std::tie(a.origin.z, a.origin.y, a.origin.x) < std::tie(b.origin.z, b.origin.y, b.origin.x);
+  });
+  stats.bricks = int64_t(seg.bricks.size());
+  size_t w = 0;
+  for (size_t i = 0; i < pending_bricks_.size(); ++i)
+    if (keep[i]) pending_bricks_[w++] = pending_bricks_[i];
+  pending_bricks_.resize(w);
+  if (cb_) cb_(std::move(seg));
+}
+
+EngineResult BandRun::run() {
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
+  EngineResult result;
+  track_marks_ = opt_.mode == PropagationMode::kExact;
+
+  const bool segmented = segment_vox_ > 0;
+  auto upperOf = [&](int i) {
+    double u = segmented ? (i + 1) * segment_vox_ : INFINITY;
+    return std::min(u, limit_vox_);
+  };
+  auto gatherFront = [&]() {
+    std::vector<FrontEntry> front;
+    size_t n = 0;
+    for (auto& tb : buffers_) n += tb.next.size();
+    front.reserve(n);
+    for (auto& tb : buffers_) {
+      front.insert(front.end(), tb.next.begin(), tb.next.end());
+      tb.next.clear();
+    }
+    // Snapshot each changed voxel's site as of the end of the step: the next step offers exactly these.
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i != r.end(); ++i) {
+        BrickState* b = table_[front[i].brick].load(std::memory_order_relaxed);
+        front[i].site = keySite(b->key[front[i].offset].load(std::memory_order_relaxed));
+      }
+    });
+    return front;
+  };
+
+  insertBand();
+  std::vector<FrontEntry> front = gatherFront();
+
+  for (int seg = 0;; ++seg) {
+    const auto ts = Clock::now();
+    SegmentStats stats;
+    stats.index = seg;
+    const double lower = seg == 0 ? 0.0 : upperOf(seg - 1);
+    const double upper = upperOf(seg);
+    stats.lower_world = lower * grid_.voxelSize();
+    stats.upper_world = upper * grid_.voxelSize();
+    thr_is_limit_ = upper >= limit_vox_;
+    thr2_ = std::isfinite(upper) ? float(upper * upper) : INFINITY;
+    segment_start_step_ = step_;
+    if (seg > 0) {
+      // The outer boundary of the finished region seeds this segment: every voxel that held back an offer.
+      std::sort(deferred_.begin(), deferred_.end(),
+                [](const VoxelRef& a, const VoxelRef& b) { return std::tie(a.brick, a.offset) < std::tie(b.brick, b.offset); });
+      deferred_.erase(std::unique(deferred_.begin(), deferred_.end(),
+                                  [](const VoxelRef& a, const VoxelRef& b) {
+                                    return a.brick == b.brick && a.offset == b.offset;
+                                  }),
+                      deferred_.end());
+      front.clear();
+      for (const VoxelRef& v : deferred_) {
+        BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
+        front.push_back({v.brick, v.offset, keySite(b->key[v.offset].load(std::memory_order_relaxed))});
+      }
+      deferred_.clear();
+    }
+    for (;;) {
+      if (opt_.interrupted && opt_.interrupted()) {
+        result.interrupted = true;
+        break;
+      }
+      if (front.empty()) {
+        if (!track_marks_) break;
+        front = correct();
+        if (front.empty()) break;
+      }
+      if (++step_ >= kMaxSteps) throw std::runtime_error("distband engine: step limit exceeded");
+      ++stats.steps;
+      step(front);
+      front = gatherFront();
+    }
+    if (result.interrupted) break;
+    for (auto& tb : buffers_) {
+      deferred_.insert(deferred_.end(), tb.deferred.begin(), tb.deferred.end());
+      tb.deferred.clear();
+    }
+    const bool last = thr_is_limit_ || deferred_.empty();
+    stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
+    emitSegment(seg, lower, upper, last, stats);
+    frozen2_ = thr2_;
+    result.voxels += stats.voxels;
+    result.segments.push_back(stats);
+    if (last) break;
+  }
+  result.steps = step_;
+  result.corrections = corrections_;
+  for (auto& tb : buffers_) {
+    result.updates += tb.updates;
+    result.bricks_allocated += int64_t(tb.allocated.size());
+  }
+  result.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  return result;
+}
+
+}  // namespace
+
+EngineResult computeDistanceField(const Grid& grid, const Seeds& seeds, const EngineOptions& options,
+                                  const SegmentCallback& on_segment) {
+  if (std::string e = validateOptions(grid, options); !e.empty()) throw std::invalid_argument(e);
+  if (!seeds.region || seeds.region->size() == size_t(grid.voxelCount())) {
+  } else {
+    throw std::invalid_argument("seeds.region must hold one label per grid voxel");
+  }
+  EngineResult result;
+  auto body = [&] {
+    BandRun run(grid, seeds, options, on_segment);
+    result = run.run();
+  };
+  if (options.threads > 0) {
+    tbb::task_arena arena(options.threads);
+    arena.execute(body);
+  } else {
+    body();
+  }
+  return result;
+}
+
+}  // namespace distband

@@ -1,0 +1,89 @@
+// Engine: the adaptive iteration on an evolving active band (SMI 2009), segment by segment.
+// Contract:
+//   computeDistanceField(grid, seeds, options, on_segment) propagates closest sites from seeds.band over the
+//   grid and hands every finished segment's bricks to `on_segment`, nearest first, on the calling thread.
+//   * Segment i delivers the voxels whose |distance| lies in (i*L, (i+1)*L] (segment 0 includes 0), L =
+//     options.segment_length (0: one segment up to the limit). Every voxel with |distance| <= limit is
+//     delivered exactly once; nothing beyond the limit is computed or stored.
+//   * Storage is sparse: 8^3 bricks allocated when first touched, so memory follows the voxels inside the limit.
+//   * Compute runs on TBB. With options.threads > 0 it runs in a task_arena of that size, otherwise in the
+//     caller's arena. The result is bit-identical for any thread count.
+//   * `interrupted` is polled between steps; when it returns true the run stops and returns
+//     EngineResult::interrupted = true (bricks already delivered stay valid).
+//   * Not re-entrant per Seeds object only in the sense that seeds must outlive the call; concurrent calls
+//     on different (or the same, const) seeds are fine.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/brick.h"
+#include "core/grid.h"
+#include "core/seeds.h"
+#include "core/stencil.h"
+
+namespace distband {
+
+enum class PropagationMode {
+  /// The paper's method: vector propagation of the closest site, a voxel leaves the band when its lifespan
+  /// (alpha * first-touch time + margin steps) has run out.
+  kPaper,
+  /// Default: vector propagation until nothing changes (no lifespan cut-off), plus a second-ring correction at
+  /// Voronoi boundaries that also tries the sites held within two voxels. Exact for point seeds.
+  kExact,
+};
+
+std::string_view modeName(PropagationMode mode);
+bool parseMode(std::string_view name, PropagationMode* mode);  ///< "paper", "exact"
+
+struct EngineOptions {
+  StencilKind stencil = StencilKind::kCubic26;
+  PropagationMode mode = PropagationMode::kExact;
+  double segment_length_world = 0;                                    ///< 0: a single segment
+  double limit_world = std::numeric_limits<double>::infinity();        ///< distance limit (world units)
+  int threads = 0;                                                     ///< 0: the caller's TBB arena
+  /// Paper mode only: lifespan = ceil(alpha * t_first) + margin steps. alpha < 0 uses the stencil's
+  /// value; +infinity disables the lifespan (iterate until nothing changes). margin < 0 uses the default.
+  double lifespan_alpha = -1;
+  int lifespan_margin = -1;
+  std::function<bool()> interrupted;  ///< polled between steps; may be empty
+};
+
+struct SegmentStats {
+  int index = 0;
+  double lower_world = 0, upper_world = 0;
+  int64_t voxels = 0;      ///< voxels delivered
+  int64_t bricks = 0;      ///< brick messages delivered
+  int steps = 0;           ///< propagation steps in this segment
+  double seconds = 0;      ///< compute time of the segment (excluding the callback)
+};
+
+struct EngineResult {
+  bool interrupted = false;
+  int steps = 0;
+  int64_t voxels = 0;          ///< voxels delivered
+  int64_t updates = 0;         ///< accepted site updates (work measure)
+  int64_t corrections = 0;     ///< voxels improved by the second-ring correction
+  int64_t bricks_allocated = 0;
+  double seconds = 0;
+  std::vector<SegmentStats> segments;
+};
+
+/// Returns "" if the options are usable with this grid, otherwise a message naming the field and the rule.
+std::string validateOptions(const Grid& grid, const EngineOptions& options);
+
+using SegmentCallback = std::function<void(SegmentBricks&&)>;
+
+/// Runs the engine. Preconditions (checked, std::invalid_argument): grid.validate() and validateOptions() are
+/// empty, every band voxel lies inside the grid and names a site < seeds.siteCount() or kNoSite.
+EngineResult computeDistanceField(const Grid& grid, const Seeds& seeds, const EngineOptions& options,
+                                  const SegmentCallback& on_segment);
+
+/// The default lifespan margin (steps) added in paper mode; see docs/algorithm.md for how it was found.
+int defaultLifespanMargin(StencilKind stencil);
+
+}  // namespace distband

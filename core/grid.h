@@ -1,0 +1,59 @@
+// Grid: the index-space box a distance field is computed on.
+// Contract: voxel (i,j,k) sits at world position origin + voxel_size * (i,j,k) (OpenVDB's cell-centred
+// convention with the transform's translation = origin). Valid voxels are 0 <= i < dims.x (likewise j, k).
+// Distances leave the engine in world units; inside the engine they are in voxels.
+// Immutable after construction; safe to share between threads.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "core/types.h"
+
+namespace distband {
+
+inline constexpr int kBrickLog2 = 3;
+inline constexpr int kBrickSize = 1 << kBrickLog2;  ///< voxels along a brick edge (8, like OpenVDB leaves)
+inline constexpr int kBrickVoxels = kBrickSize * kBrickSize * kBrickSize;
+
+/// The largest extent the engine accepts along one axis (steps and brick tables are sized for it).
+inline constexpr int kMaxGridDim = 16384;
+
+class Grid {
+ public:
+  Grid() = default;
+  Grid(Vec3d origin, double voxel_size, Coord dims) : origin_(origin), voxel_size_(voxel_size), dims_(dims) {}
+
+  const Vec3d& origin() const { return origin_; }
+  double voxelSize() const { return voxel_size_; }
+  const Coord& dims() const { return dims_; }
+
+  Vec3d worldOf(const Coord& c) const {
+    return {origin_.x + voxel_size_ * c.x, origin_.y + voxel_size_ * c.y, origin_.z + voxel_size_ * c.z};
+  }
+  /// Continuous index-space position of a world point (voxel centres at integers).
+  Vec3d indexOf(const Vec3d& w) const {
+    return {(w.x - origin_.x) / voxel_size_, (w.y - origin_.y) / voxel_size_, (w.z - origin_.z) / voxel_size_};
+  }
+  bool contains(const Coord& c) const {
+    return c.x >= 0 && c.y >= 0 && c.z >= 0 && c.x < dims_.x && c.y < dims_.y && c.z < dims_.z;
+  }
+  int64_t voxelCount() const { return int64_t(dims_.x) * dims_.y * dims_.z; }
+  /// Bricks along each axis (dims rounded up to a multiple of 8).
+  Coord brickDims() const {
+    return {(dims_.x + kBrickSize - 1) >> kBrickLog2, (dims_.y + kBrickSize - 1) >> kBrickLog2,
+            (dims_.z + kBrickSize - 1) >> kBrickLog2};
+  }
+  /// Linear index of a voxel in a dense x-fastest array ([z][y][x] in C order, as .npy files hold it).
+  int64_t denseIndex(const Coord& c) const { return (int64_t(c.z) * dims_.y + c.y) * dims_.x + c.x; }
+
+  /// Empty string when usable, otherwise why not (dims out of range, non-finite or non-positive voxel size).
+  std::string validate() const;
+
+ private:
+  Vec3d origin_{};
+  double voxel_size_ = 1.0;
+  Coord dims_{};
+};
+
+}  // namespace distband

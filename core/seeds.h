@@ -1,0 +1,49 @@
+// Seeds: what the engine propagates from — the initial band and the table of sites it refers to.
+// Contract: a seed source (points, volume, mesh: see core/seeds/) builds a Seeds for one Grid. The engine reads
+// it without modifying it, from many threads at once.
+//   * A *site* is a closest-feature candidate. kPoint sites are positions (index space, voxel units); kTriangle
+//     sites are triangles (index space) and a voxel's distance to one is the exact point–triangle distance.
+//   * `band` lists the voxels the propagation starts from, each with its site; the engine computes their
+//     distances from the site itself. kNoSite marks a voxel whose distance is 0 and that offers nothing to its
+//     neighbours (the interior of a seed volume).
+//   * `region` (optional, dense x-fastest, one byte per voxel): propagation never crosses between voxels of
+//     different labels (used for signed seed volumes, where inside and outside have different site sets).
+//   * `sign` (optional): called on every delivered brick to turn unsigned distances into signed ones
+//     (negative inside, OpenVDB's convention); it receives each masked voxel's site.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "core/brick.h"
+#include "core/grid.h"
+#include "core/types.h"
+
+namespace distband {
+
+inline constexpr uint32_t kNoSite = std::numeric_limits<uint32_t>::max() - 1;
+
+enum class SiteKind { kPoint, kTriangle };
+
+struct BandVoxel {
+  Coord voxel;
+  uint32_t site = kNoSite;
+};
+
+struct Seeds {
+  SiteKind kind = SiteKind::kPoint;
+  std::vector<Vec3d> points;                    ///< kPoint sites, index space
+  std::vector<std::array<Vec3d, 3>> triangles;  ///< kTriangle sites, index space
+  std::vector<BandVoxel> band;
+  std::shared_ptr<const std::vector<uint8_t>> region;  ///< null, or grid.voxelCount() labels
+  /// Signs the masked values of `brick` in place; `sites[i]` is the site of voxel offset i (kNoSite if none).
+  std::function<void(Brick& brick, const uint32_t* sites)> sign;
+
+  size_t siteCount() const { return kind == SiteKind::kPoint ? points.size() : triangles.size(); }
+};
+
+}  // namespace distband

@@ -1,0 +1,17 @@
+// Point seeds: the distance to the nearest of a list of points (the paper's one-point and two-point cases).
+// Contract: points are world coordinates and may lie outside the grid; each point seeds the voxels of the 3^3
+// block around its nearest in-grid voxel. Unsigned. Returns an error string (and leaves `out` untouched) for an
+// empty list or non-finite coordinates.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/grid.h"
+#include "core/seeds.h"
+
+namespace distband {
+
+std::string makePointSeeds(const Grid& grid, const std::vector<Vec3d>& world_points, Seeds* out);
+
+}  // namespace distband

@@ -1,0 +1,1 @@
+// Keeps distband_test_support non-empty before any oracle exists.
