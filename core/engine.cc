@@ -72,6 +72,8 @@ constexpr uint16_t kNoStamp = 0xFFFF;
 constexpr int kMaxSteps = 65000;  // expiry and stamps are 16-bit step numbers
 constexpr uint8_t kMarked = 1;    // saw two different sites: a Voronoi-boundary candidate for the correction
 constexpr uint8_t kEmitted = 2;
+constexpr uint8_t kDirty = 4;   // changed since the last correction round (listed in ThreadBuffers::dirty)
+constexpr uint8_t kQueued = 8;  // already a candidate of the current correction round
 
 inline uint64_t packKey(float d2, uint32_t site) { return (uint64_t(std::bit_cast<uint32_t>(d2)) << 32) | site; }
 inline float keyDist2(uint64_t k) { return std::bit_cast<float>(uint32_t(k >> 32)); }
@@ -112,6 +114,7 @@ struct ThreadBuffers {
   std::vector<uint32_t> pending;      // bricks that got their first unemitted voxel
   std::vector<BrickState*> allocated;
   std::vector<std::pair<VoxelRef, uint64_t>> corrections;
+  std::vector<VoxelRef> dirty;        // changed since the last correction round (exact mode)
   int64_t updates = 0;
 };
 
@@ -204,6 +207,9 @@ class BandRun {
         } else if (track_marks_ && keySite(k) != keySite(newkey)) {
           mark(b, bi, off, tb);
         }
+        if (collect_dirty_ && !(b->flags[off].load(std::memory_order_relaxed) & kDirty) &&
+            !(b->flags[off].fetch_or(kDirty, std::memory_order_relaxed) & kDirty))
+          tb.dirty.push_back({bi, uint16_t(off)});
         if (propagates && b->stamp[off].exchange(uint16_t(step_), std::memory_order_relaxed) != uint16_t(step_))
           tb.next.push_back({bi, uint16_t(off), 0});
         return true;
@@ -217,7 +223,8 @@ class BandRun {
   void pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb);
   void insertBand();
   void step(std::vector<FrontEntry>& front);
-  std::vector<FrontEntry> correct();
+  std::vector<FrontEntry> correct(bool first_round);
+  void gatherBlock(const Coord& q, uint64_t* block) const;
   void emitSegment(int index, double lower_vox, double upper_vox, bool last, SegmentStats& stats);
 
   const Grid& grid_;
@@ -238,6 +245,7 @@ class BandRun {
   int margin_ = 0;
   bool use_lifespan_ = false;
   bool track_marks_ = false;
+  bool collect_dirty_ = false;  // after a segment's first correction round
   double limit_vox_ = 0, segment_vox_ = 0;
 
   int step_ = 0;
@@ -378,41 +386,74 @@ void BandRun::step(std::vector<FrontEntry>& front) {
 }
 
 // The second-ring correction (exact mode). A voxel whose true closest site is held by none of its stencil
-// neighbours can only sit where different sites meet; such voxels were marked when two sites met there. Each one
-// still inside the current segment tries every site held within Chebyshev distance 2. Only voxels with a
-// propagating neighbour of a different site are checked: that set is decided by the field alone (marking
-// guarantees it is a subset of the marked voxels), so the result does not depend on thread timing.
-std::vector<FrontEntry> BandRun::correct() {
-  for (auto& tb : buffers_) {
-    marked_.insert(marked_.end(), tb.marked.begin(), tb.marked.end());
-    tb.marked.clear();
+// neighbours can only sit where different sites meet. Such a voxel, once inside the current segment, tries every
+// site held within Chebyshev distance 2. Which voxels are checked is decided by the field alone, so the result
+// does not depend on thread timing:
+//   * the first round of a segment checks every voxel with a propagating neighbour of a different site (marking
+//     guarantees each such voxel was marked when the two sites met there: the marked list is a superset);
+//   * later rounds check, with the same test, only voxels within distance 2 of a voxel changed since the last
+//     round (a deterministic set, since each step is deterministic).
+std::vector<FrontEntry> BandRun::correct(bool first_round) {
+  std::vector<VoxelRef> candidates;
+  if (first_round) {
+    for (auto& tb : buffers_) {
+      marked_.insert(marked_.end(), tb.marked.begin(), tb.marked.end());
+      tb.marked.clear();
+    }
+    // Delivered voxels leave the list; those beyond the threshold wait for their segment.
+    std::erase_if(marked_, [&](const VoxelRef& v) {
+      const float d2 = keyDist2(table_[v.brick].load(std::memory_order_relaxed)->key[v.offset].load(
+          std::memory_order_relaxed));
+      if (d2 <= frozen2_) return true;
+      if (d2 <= thr2_) {
+        candidates.push_back(v);
+        return true;
+      }
+      return false;
+    });
+  } else {
+    for (auto& tb : buffers_) {
+      for (const VoxelRef& d : tb.dirty) {
+        BrickState* db = table_[d.brick].load(std::memory_order_relaxed);
+        db->flags[d.offset].fetch_and(uint8_t(~kDirty), std::memory_order_relaxed);
+        const Coord c = db->origin + brickLocal(d.offset);
+        for (int dz = -2; dz <= 2; ++dz)
+          for (int dy = -2; dy <= 2; ++dy)
+            for (int dx = -2; dx <= 2; ++dx) {
+              const Coord q{c.x + dx, c.y + dy, c.z + dz};
+              if (!grid_.contains(q)) continue;
+              const uint32_t bi = brickIndex(q.x, q.y, q.z);
+              BrickState* b = table_[bi].load(std::memory_order_relaxed);
+              if (!b) continue;
+              const int off = brickOffset(q.x & 7, q.y & 7, q.z & 7);
+              if (b->key[off].load(std::memory_order_relaxed) == kUntouched) continue;
+              const uint8_t f = b->flags[off].load(std::memory_order_relaxed);
+              if (f & kQueued) continue;
+              b->flags[off].store(f | kQueued, std::memory_order_relaxed);
+              candidates.push_back({bi, uint16_t(off)});
+            }
+      }
+      tb.dirty.clear();
+    }
+    for (const VoxelRef& v : candidates)
+      table_[v.brick].load(std::memory_order_relaxed)->flags[v.offset].fetch_and(uint8_t(~kQueued),
+                                                                                 std::memory_order_relaxed);
   }
-  // Drop voxels already delivered; keep the rest (those beyond the threshold wait for their segment).
-  std::erase_if(marked_, [&](const VoxelRef& v) {
-    BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
-    return keyDist2(b->key[v.offset].load(std::memory_order_relaxed)) <= frozen2_;
-  });
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, marked_.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
     ThreadBuffers& tb = buffers_.local();
+    uint64_t block[125];  // keys of the 5^3 block around the voxel, kUntouched where nothing usable
     for (size_t i = r.begin(); i != r.end(); ++i) {
-      const VoxelRef v = marked_[i];
+      const VoxelRef v = candidates[i];
       BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
       const uint64_t k = b->key[v.offset].load(std::memory_order_relaxed);
-      if (keyDist2(k) > thr2_ || keySite(k) == kNoSite) continue;
+      if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSite) continue;
       const Coord q = b->origin + brickLocal(v.offset);
-      const uint8_t region = regionOf(q);
-      auto siteAt = [&](const Coord& c, uint64_t* out) {
-        if (!grid_.contains(c) || (region_ && regionOf(c) != region)) return false;
-        BrickState* nb = table_[brickIndex(c.x, c.y, c.z)].load(std::memory_order_relaxed);
-        if (!nb) return false;
-        *out = nb->key[brickOffset(c.x & 7, c.y & 7, c.z & 7)].load(std::memory_order_relaxed);
-        return *out != kUntouched && keySite(*out) != kNoSite;
-      };
+      gatherBlock(q, block);
       bool boundary = false;
-      for (const Coord& d : stencil_.links) {
+      for (const Link& d : links_) {
         const Coord n{q.x - d.x, q.y - d.y, q.z - d.z};
-        uint64_t nk;
-        if (stencil_.propagates(n) && siteAt(n, &nk) && keySite(nk) != keySite(k)) {
+        const uint64_t nk = block[(2 - d.z) * 25 + (2 - d.y) * 5 + (2 - d.x)];
+        if (nk != kUntouched && keySite(nk) != keySite(k) && stencil_.propagates(n)) {
           boundary = true;
           break;
         }
@@ -420,17 +461,15 @@ std::vector<FrontEntry> BandRun::correct() {
       if (!boundary) continue;
       uint64_t best = k;
       uint32_t last_site = keySite(k);
-      for (int dz = -2; dz <= 2; ++dz)
-        for (int dy = -2; dy <= 2; ++dy)
-          for (int dx = -2; dx <= 2; ++dx) {
-            uint64_t nk;
-            if (!siteAt({q.x + dx, q.y + dy, q.z + dz}, &nk)) continue;
-            const uint32_t s = keySite(nk);
-            if (s == last_site) continue;
-            last_site = s;
-            const uint64_t cand = packKey(metric_.key2(s, q.x, q.y, q.z), s);
-            if (cand < best) best = cand;
-          }
+      for (int j = 0; j < 125; ++j) {
+        const uint64_t nk = block[j];
+        if (nk == kUntouched) continue;
+        const uint32_t s = keySite(nk);
+        if (s == last_site || s == keySite(best)) continue;
+        last_site = s;
+        const uint64_t cand = packKey(metric_.key2(s, q.x, q.y, q.z), s);
+        if (cand < best) best = cand;
+      }
       if (best < k) tb.corrections.push_back({v, best});
     }
   });
@@ -441,11 +480,63 @@ std::vector<FrontEntry> BandRun::correct() {
       b->key[v.offset].store(key, std::memory_order_relaxed);
       b->stamp[v.offset].store(uint16_t(step_), std::memory_order_relaxed);
       ++corrections_;
+      if (!(b->flags[v.offset].fetch_or(kDirty, std::memory_order_relaxed) & kDirty)) tb.dirty.push_back(v);
       if (stencil_.propagates(b->origin + brickLocal(v.offset))) front.push_back({v.brick, v.offset, keySite(key)});
     }
     tb.corrections.clear();
   }
   return front;
+}
+
+// Keys of the 5^3 block centred on q (index (dz+2)*25 + (dy+2)*5 + (dx+2)); kUntouched outside the grid, in
+// another region, untouched, or holding no site.
+void BandRun::gatherBlock(const Coord& q, uint64_t* block) const {
+  // Per axis: is the coordinate inside the grid, which of the (at most two) bricks holds it, its local index.
+  int bsel[3][5], local[3][5];
+  bool valid[3][5];
+  const int qc[3] = {q.x, q.y, q.z}, dims[3] = {dims_.x, dims_.y, dims_.z};
+  int b0[3];
+  for (int a = 0; a < 3; ++a) {
+    b0[a] = (qc[a] - 2) >> kBrickLog2;
+    for (int i = 0; i < 5; ++i) {
+      const int c = qc[a] + i - 2;
+      valid[a][i] = c >= 0 && c < dims[a];
+      bsel[a][i] = (c >> kBrickLog2) - b0[a];
+      local[a][i] = c & 7;
+    }
+  }
+  const int bdims[3] = {bdims_.x, bdims_.y, bdims_.z};
+  BrickState* bricks[2][2][2];
+  for (int a = 0; a < 2; ++a)
+    for (int b = 0; b < 2; ++b)
+      for (int c = 0; c < 2; ++c) {
+        const int bx = b0[0] + c, by = b0[1] + b, bz = b0[2] + a;
+        bricks[a][b][c] = (bx >= 0 && by >= 0 && bz >= 0 && bx < bdims[0] && by < bdims[1] && bz < bdims[2])
+                              ? table_[(size_t(bz) * bdims[1] + by) * bdims[0] + bx].load(std::memory_order_relaxed)
+                              : nullptr;
+      }
+  const uint8_t region = regionOf(q);
+  int j = 0;
+  for (int iz = 0; iz < 5; ++iz)
+    for (int iy = 0; iy < 5; ++iy) {
+      if (!valid[2][iz] || !valid[1][iy]) {
+        for (int ix = 0; ix < 5; ++ix) block[j++] = kUntouched;
+        continue;
+      }
+      BrickState* const* row = bricks[bsel[2][iz]][bsel[1][iy]];
+      const int yz = (local[1][iy] << 3) | local[2][iz];
+      for (int ix = 0; ix < 5; ++ix, ++j) {
+        BrickState* nb = row[bsel[0][ix]];
+        uint64_t nk = kUntouched;
+        if (valid[0][ix] && nb) {
+          nk = nb->key[(local[0][ix] << 6) | yz].load(std::memory_order_relaxed);
+          if (keySite(nk) == kNoSite ||
+              (region_ && regionOf({q.x + ix - 2, q.y + iy - 2, q.z + iz - 2}) != region))
+            nk = kUntouched;
+        }
+        block[j] = nk;
+      }
+    }
 }
 
 void BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool last, SegmentStats& stats) {
@@ -551,6 +642,7 @@ EngineResult BandRun::run() {
     thr_is_limit_ = upper >= limit_vox_;
     thr2_ = std::isfinite(upper) ? float(upper * upper) : INFINITY;
     segment_start_step_ = step_;
+    collect_dirty_ = false;
     if (seg > 0) {
       // The outer boundary of the finished region seeds this segment: every voxel that held back an offer.
       std::sort(deferred_.begin(), deferred_.end(),
@@ -574,7 +666,8 @@ EngineResult BandRun::run() {
       }
       if (front.empty()) {
         if (!track_marks_) break;
-        front = correct();
+        front = correct(!collect_dirty_);
+        collect_dirty_ = true;
         if (front.empty()) break;
       }
       if (++step_ >= kMaxSteps) throw std::runtime_error("distband engine: step limit exceeded");
