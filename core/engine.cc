@@ -204,7 +204,10 @@ class BandRun {
             b->expiry[off].store(uint16_t(std::min(exp, double(kMaxSteps))), std::memory_order_relaxed);
           }
           if (!b->pending.load(std::memory_order_relaxed) && !b->pending.exchange(true)) tb.pending.push_back(bi);
-        } else if (track_marks_ && keySite(k) != keySite(newkey)) {
+        } else if (track_marks_ && !propagates && keySite(k) != keySite(newkey)) {
+          // A voxel that never offers its site (FCC's odd half) cannot meet a different neighbour site through a
+          // rejected offer of its own, so a replacement marks it. Propagating voxels are marked by the rejection
+          // that two final, different neighbour sites always produce.
           mark(b, bi, off, tb);
         }
         if (collect_dirty_ && !(b->flags[off].load(std::memory_order_relaxed) & kDirty) &&
@@ -448,17 +451,23 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
       const uint64_t k = b->key[v.offset].load(std::memory_order_relaxed);
       if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSite) continue;
       const Coord q = b->origin + brickLocal(v.offset);
-      gatherBlock(q, block);
+      // Cheap test first: does a propagating stencil neighbour hold a different site?
       bool boundary = false;
       for (const Link& d : links_) {
         const Coord n{q.x - d.x, q.y - d.y, q.z - d.z};
-        const uint64_t nk = block[(2 - d.z) * 25 + (2 - d.y) * 5 + (2 - d.x)];
-        if (nk != kUntouched && keySite(nk) != keySite(k) && stencil_.propagates(n)) {
-          boundary = true;
-          break;
-        }
+        if (uint32_t(n.x) >= uint32_t(dims_.x) || uint32_t(n.y) >= uint32_t(dims_.y) ||
+            uint32_t(n.z) >= uint32_t(dims_.z) || !stencil_.propagates(n))
+          continue;
+        BrickState* nb = table_[brickIndex(n.x, n.y, n.z)].load(std::memory_order_relaxed);
+        if (!nb) continue;
+        const uint64_t nk = nb->key[brickOffset(n.x & 7, n.y & 7, n.z & 7)].load(std::memory_order_relaxed);
+        if (nk == kUntouched || keySite(nk) == keySite(k) || keySite(nk) == kNoSite) continue;
+        if (region_ && regionOf(n) != regionOf(q)) continue;
+        boundary = true;
+        break;
       }
       if (!boundary) continue;
+      gatherBlock(q, block);
       uint64_t best = k;
       uint32_t last_site = keySite(k);
       for (int j = 0; j < 125; ++j) {
