@@ -70,6 +70,9 @@ constexpr uint64_t kUntouched = ~uint64_t(0);
 constexpr uint16_t kNeverExpires = 0xFFFF;
 constexpr uint16_t kNoStamp = 0xFFFF;
 constexpr int kMaxSteps = 65000;  // expiry and stamps are 16-bit step numbers
+// Offers are admitted this many voxels beyond the segment threshold (and the limit), while only voxels within the
+// threshold are frozen and delivered: a closest site whose path briefly runs outside the threshold still arrives.
+constexpr double kAdmitSlackVoxels = 2.0;
 constexpr uint8_t kMarked = 1;    // saw two different sites: a Voronoi-boundary candidate for the correction
 constexpr uint8_t kEmitted = 2;
 constexpr uint8_t kDirty = 4;   // changed since the last correction round (listed in ThreadBuffers::dirty)
@@ -109,7 +112,7 @@ struct FrontEntry {
 
 struct ThreadBuffers {
   std::vector<FrontEntry> next;       // voxels changed in this step (site filled in after the step)
-  std::vector<VoxelRef> deferred;     // pushers with an offer beyond the segment threshold
+  std::vector<FrontEntry> deferred;   // offers held back beyond the admission threshold (voxel, site)
   std::vector<VoxelRef> marked;       // newly marked Voronoi-boundary candidates
   std::vector<uint32_t> pending;      // bricks that got their first unemitted voxel
   std::vector<BrickState*> allocated;
@@ -151,6 +154,9 @@ class BandRun {
       alpha_ = opt.lifespan_alpha < 0 ? stencil_.alpha : opt.lifespan_alpha;
       margin_ = opt.lifespan_margin < 0 ? defaultLifespanMargin(opt.stencil) : opt.lifespan_margin;
       use_lifespan_ = std::isfinite(alpha_);
+      max_link_ = stencil_.fcc ? std::sqrt(2.0) : 0.0;
+      if (!stencil_.fcc)
+        for (const Coord& l : stencil_.links) max_link_ = std::max(max_link_, std::sqrt(double(l.x * l.x + l.y * l.y + l.z * l.z)));
     }
     const double h = grid.voxelSize();
     limit_vox_ = opt.limit_world / h;
@@ -185,6 +191,16 @@ class BandRun {
     return b;
   }
 
+  // The paper's lifespan, t_max = (1 + alpha) * t_min, with t_min taken from the voxel's first distance beyond the
+  // segment's lower bound (t_min = distance / longest link) rather than from its first-touch step. The two agree
+  // when the band sits on the sites; the distance form stays right when it does not (seeds outside the grid, a
+  // segment restarting from the finished region). See docs/algorithm.md.
+  uint16_t expiryFor(float d2) const {
+    const double beyond = std::max(0.0, std::sqrt(double(d2)) - lower_vox_);
+    const double exp = segment_start_step_ + std::ceil((1.0 + alpha_) * beyond / max_link_) + margin_;
+    return uint16_t(std::min(exp, double(kMaxSteps)));
+  }
+
   void mark(BrickState* b, uint32_t bi, int off, ThreadBuffers& tb) {
     if (!(b->flags[off].load(std::memory_order_relaxed) & kMarked) &&
         !(b->flags[off].fetch_or(kMarked, std::memory_order_relaxed) & kMarked))
@@ -198,11 +214,7 @@ class BandRun {
       if (b->key[off].compare_exchange_weak(k, newkey, std::memory_order_relaxed)) {
         ++tb.updates;
         if (k == kUntouched) {
-          if (use_lifespan_) {
-            const double t_local = double(step_ - segment_start_step_);
-            const double exp = double(step_) + std::ceil(alpha_ * t_local) + margin_;
-            b->expiry[off].store(uint16_t(std::min(exp, double(kMaxSteps))), std::memory_order_relaxed);
-          }
+          if (use_lifespan_) b->expiry[off].store(expiryFor(keyDist2(newkey)), std::memory_order_relaxed);
           if (!b->pending.load(std::memory_order_relaxed) && !b->pending.exchange(true)) tb.pending.push_back(bi);
         } else if (track_marks_ && !propagates && keySite(k) != keySite(newkey)) {
           // A voxel that never offers its site (FCC's odd half) cannot meet a different neighbour site through a
@@ -213,8 +225,12 @@ class BandRun {
         if (collect_dirty_ && !(b->flags[off].load(std::memory_order_relaxed) & kDirty) &&
             !(b->flags[off].fetch_or(kDirty, std::memory_order_relaxed) & kDirty))
           tb.dirty.push_back({bi, uint16_t(off)});
-        if (propagates && b->stamp[off].exchange(uint16_t(step_), std::memory_order_relaxed) != uint16_t(step_))
+        // Listed once per step. Two threads lowering the same voxel at once may both list it: the duplicate
+        // offers the same snapshot site twice, which changes nothing.
+        if (propagates && b->stamp[off].load(std::memory_order_relaxed) != uint16_t(step_)) {
+          b->stamp[off].store(uint16_t(step_), std::memory_order_relaxed);
           tb.next.push_back({bi, uint16_t(off), 0});
+        }
         return true;
       }
     }
@@ -228,7 +244,8 @@ class BandRun {
   void step(std::vector<FrontEntry>& front);
   std::vector<FrontEntry> correct(bool first_round);
   void gatherBlock(const Coord& q, uint64_t* block) const;
-  void emitSegment(int index, double lower_vox, double upper_vox, bool last, SegmentStats& stats);
+  bool emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats);
+  void rearmLifespans();
 
   const Grid& grid_;
   const Seeds& seeds_;
@@ -246,6 +263,8 @@ class BandRun {
   std::vector<Link> links_;
   double alpha_ = 0;
   int margin_ = 0;
+  double max_link_ = 1;     // longest link between propagating voxels (voxels per step at best)
+  double lower_vox_ = 0;    // the current segment's lower distance bound
   bool use_lifespan_ = false;
   bool track_marks_ = false;
   bool collect_dirty_ = false;  // after a segment's first correction round
@@ -253,14 +272,15 @@ class BandRun {
 
   int step_ = 0;
   int segment_start_step_ = 0;
-  float thr2_ = 0;       // offers beyond this squared distance wait for a later segment
+  float thr2_ = 0;       // voxels within this squared distance are delivered at the end of the segment
+  float admit2_ = 0;     // offers beyond this squared distance wait for a later segment
   float frozen2_ = -1;   // voxels at or below this squared distance are final (delivered)
   bool thr_is_limit_ = false;
 
   tbb::enumerable_thread_specific<ThreadBuffers> buffers_;
   std::vector<uint32_t> pending_bricks_;
   std::vector<VoxelRef> marked_;
-  std::vector<VoxelRef> deferred_;
+  std::vector<FrontEntry> deferred_;
   int64_t corrections_ = 0;
 };
 
@@ -289,7 +309,7 @@ void BandRun::pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb) 
   const uint8_t* const region_map = region_;
   const uint8_t region = regionOf(p);
   const uint32_t dx = uint32_t(dims_.x), dy = uint32_t(dims_.y), dz = uint32_t(dims_.z);
-  const float thr2 = thr2_, frozen2 = frozen2_;
+  const float admit2 = admit2_, frozen2 = frozen2_;
   const bool track = track_marks_, lifespan = use_lifespan_, thr_is_limit = thr_is_limit_;
   const int step = step_;
   // Point sites: the offset from the site to p, so a neighbour's squared distance is three multiply-adds.
@@ -340,7 +360,7 @@ void BandRun::pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb) 
       }
       if (lifespan && step > gb->expiry[goff].load(std::memory_order_relaxed)) continue;  // FINISHED
     }
-    if (d2 > thr2) {
+    if (d2 > admit2) {
       if (!thr_is_limit) deferred = true;
       continue;
     }
@@ -352,12 +372,13 @@ void BandRun::pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb) 
       mark(gb, gbi, goff, tb);
     }
   }
-  if (deferred) tb.deferred.push_back({e.brick, e.offset});
+  if (deferred) tb.deferred.push_back(e);
 }
 
 void BandRun::insertBand() {
   const auto& band = seeds_.band;
-  const float limit2 = std::isfinite(limit_vox_) ? float(limit_vox_ * limit_vox_) : INFINITY;
+  const double admit_limit = limit_vox_ + kAdmitSlackVoxels;
+  const float limit2 = std::isfinite(admit_limit) ? float(admit_limit * admit_limit) : INFINITY;
   for (const BandVoxel& v : band) {
     if (!grid_.contains(v.voxel))
       throw std::invalid_argument(fmt::format("band voxel ({},{},{}) lies outside the grid", v.voxel.x, v.voxel.y,
@@ -548,7 +569,23 @@ void BandRun::gatherBlock(const Coord& q, uint64_t* block) const {
     }
 }
 
-void BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool last, SegmentStats& stats) {
+// Voxels admitted beyond the previous threshold but not yet delivered start the new segment's lifespan clock.
+void BandRun::rearmLifespans() {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pending_bricks_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
+      for (int off = 0; off < kBrickVoxels; ++off) {
+        const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+        if (k == kUntouched || (b->flags[off].load(std::memory_order_relaxed) & kEmitted)) continue;
+        b->expiry[off].store(expiryFor(keyDist2(k)), std::memory_order_relaxed);
+      }
+    }
+  });
+}
+
+// Delivers every touched voxel within the threshold not delivered before. Returns whether this was the last
+// segment: the limit was reached, or nothing was deferred and no admitted voxel waits beyond the threshold.
+bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats) {
   for (auto& tb : buffers_) {
     pending_bricks_.insert(pending_bricks_.end(), tb.pending.begin(), tb.pending.end());
     tb.pending.clear();
@@ -586,6 +623,9 @@ void BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool la
                         if (seeds_.sign && !brick.mask.empty()) seeds_.sign(brick, sites);
                       }
                     });
+  bool waiting = false;
+  for (uint8_t kept : keep) waiting |= kept != 0;
+  const bool last = thr_is_limit_ || (nothing_deferred && !waiting);
   SegmentBricks seg;
   seg.index = index;
   seg.lower_world = lower_vox * h;
@@ -605,6 +645,7 @@ void BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool la
     if (keep[i]) pending_bricks_[w++] = pending_bricks_[i];
   pending_bricks_.resize(w);
   if (cb_) cb_(std::move(seg));
+  return last;
 }
 
 EngineResult BandRun::run() {
@@ -650,22 +691,23 @@ EngineResult BandRun::run() {
     stats.upper_world = upper * grid_.voxelSize();
     thr_is_limit_ = upper >= limit_vox_;
     thr2_ = std::isfinite(upper) ? float(upper * upper) : INFINITY;
+    admit2_ = std::isfinite(upper) ? float((upper + kAdmitSlackVoxels) * (upper + kAdmitSlackVoxels)) : INFINITY;
     segment_start_step_ = step_;
+    lower_vox_ = lower;
+    if (seg > 0 && use_lifespan_) rearmLifespans();
     collect_dirty_ = false;
     if (seg > 0) {
-      // The outer boundary of the finished region seeds this segment: every voxel that held back an offer.
-      std::sort(deferred_.begin(), deferred_.end(),
-                [](const VoxelRef& a, const VoxelRef& b) { return std::tie(a.brick, a.offset) < std::tie(b.brick, b.offset); });
-      deferred_.erase(std::unique(deferred_.begin(), deferred_.end(),
-                                  [](const VoxelRef& a, const VoxelRef& b) {
-                                    return a.brick == b.brick && a.offset == b.offset;
-                                  }),
-                      deferred_.end());
-      front.clear();
-      for (const VoxelRef& v : deferred_) {
-        BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
-        front.push_back({v.brick, v.offset, keySite(b->key[v.offset].load(std::memory_order_relaxed))});
-      }
+      // The outer boundary of the finished region seeds this segment: every offer held back, replayed with the
+      // site it offered then (the voxel may hold a better one for itself now, but not for its neighbours).
+      auto order = [](const FrontEntry& a, const FrontEntry& b) {
+        return std::tie(a.brick, a.offset, a.site) < std::tie(b.brick, b.offset, b.site);
+      };
+      auto same = [](const FrontEntry& a, const FrontEntry& b) {
+        return a.brick == b.brick && a.offset == b.offset && a.site == b.site;
+      };
+      tbb::parallel_sort(deferred_.begin(), deferred_.end(), order);
+      deferred_.erase(std::unique(deferred_.begin(), deferred_.end(), same), deferred_.end());
+      front.swap(deferred_);
       deferred_.clear();
     }
     for (;;) {
@@ -689,9 +731,8 @@ EngineResult BandRun::run() {
       deferred_.insert(deferred_.end(), tb.deferred.begin(), tb.deferred.end());
       tb.deferred.clear();
     }
-    const bool last = thr_is_limit_ || deferred_.empty();
     stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
-    emitSegment(seg, lower, upper, last, stats);
+    const bool last = emitSegment(seg, lower, upper, deferred_.empty(), stats);
     frozen2_ = thr2_;
     result.voxels += stats.voxels;
     result.segments.push_back(stats);

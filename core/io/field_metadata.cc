@@ -1,0 +1,50 @@
+#include "core/io/field_metadata.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+namespace distband {
+
+std::string fieldMetadataJson(const FieldMetadata& m) {
+  using nlohmann::json;
+  auto finiteOrNull = [](double v) { return std::isfinite(v) ? json(v) : json(nullptr); };
+  const Coord d = m.grid.dims();
+  const Vec3d o = m.grid.origin();
+  json j = {
+      {"format", "distband-field/1"},
+      {"data_file", m.data_file},
+      {"dims", {d.x, d.y, d.z}},
+      {"origin", {o.x, o.y, o.z}},
+      {"voxel_size", m.grid.voxelSize()},
+      {"layout", "C order, shape (Z, Y, X): element [z][y][x] is voxel (x, y, z) at origin + voxel_size * (x, y, z)"},
+      {"dtype", "float32"},
+      {"units", "world"},
+      {"signed", m.signed_distance},
+      {"sign_convention", m.signed_distance ? "negative inside (OpenVDB)" : "unsigned"},
+      {"limit", finiteOrNull(m.limit_world)},
+      {"background", finiteOrNull(m.background_world)},
+      {"stencil", m.stencil},
+      {"mode", m.mode},
+      {"segment_length", m.segment_length_world},
+      {"voxels_delivered", m.voxels_delivered},
+      {"seconds", m.seconds},
+  };
+  return j.dump(2) + "\n";
+}
+
+std::string writeFieldMetadata(const std::string& path, const FieldMetadata& meta) {
+  const std::string text = fieldMetadataJson(meta);
+  std::ofstream f(path, std::ios::trunc);
+  if (!f) return fmt::format("{}: cannot open for writing: {}", path, std::strerror(errno));
+  f << text;
+  f.close();
+  if (!f) return fmt::format("{}: write failed: {}", path, std::strerror(errno));
+  return {};
+}
+
+}  // namespace distband

@@ -1,0 +1,345 @@
+#include "core/io/npy.h"
+
+#include <bit>
+#include <cctype>
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <limits>
+
+#include <fmt/format.h>
+
+#include "core/grid.h"
+
+namespace distband {
+namespace {
+
+static_assert(std::endian::native == std::endian::little, "the .npy code assumes a little-endian host");
+
+constexpr char kMagic[] = "\x93NUMPY";
+constexpr size_t kMagicLen = 6;
+constexpr int64_t kMaxExtent = int64_t(1) << 40;
+
+// --- header parsing: the header is a Python dict literal such as
+//     {'descr': '<f4', 'fortran_order': False, 'shape': (3, 4, 5), }
+class HeaderParser {
+ public:
+  explicit HeaderParser(std::string_view text) : s_(text) {}
+
+  std::string parse(NpyArray* out) {
+    bool have_descr = false, have_order = false, have_shape = false;
+    skipSpace();
+    if (!eat('{')) return "header is not a Python dict (expected '{')";
+    for (;;) {
+      skipSpace();
+      if (eat('}')) break;
+      std::string key;
+      if (!parseString(&key)) return fmt::format("header: expected a quoted key at offset {}", pos_);
+      skipSpace();
+      if (!eat(':')) return fmt::format("header: expected ':' after key '{}'", key);
+      skipSpace();
+      if (key == "descr") {
+        if (peek() == '[') return "unsupported dtype: structured arrays are not accepted";
+        if (!parseString(&out->descr)) return "header: 'descr' must be a quoted dtype string";
+        have_descr = true;
+      } else if (key == "fortran_order") {
+        if (matchWord("True")) {
+          out->fortran_order = true;
+        } else if (matchWord("False")) {
+          out->fortran_order = false;
+        } else {
+          return "header: 'fortran_order' must be True or False";
+        }
+        have_order = true;
+      } else if (key == "shape") {
+        std::string err = parseShape(&out->shape);
+        if (!err.empty()) return err;
+        have_shape = true;
+      } else {
+        return fmt::format("header: unexpected key '{}'", key);
+      }
+      skipSpace();
+      if (eat(',')) continue;
+      skipSpace();
+      if (eat('}')) break;
+      return fmt::format("header: expected ',' or '}}' at offset {}", pos_);
+    }
+    skipSpace();
+    if (pos_ != s_.size()) return "header: unexpected text after the dict";
+    if (!have_descr) return "header: missing 'descr'";
+    if (!have_order) return "header: missing 'fortran_order'";
+    if (!have_shape) return "header: missing 'shape'";
+    return {};
+  }
+
+ private:
+  char peek() const { return pos_ < s_.size() ? s_[pos_] : '\0'; }
+  bool eat(char c) {
+    if (peek() != c) return false;
+    ++pos_;
+    return true;
+  }
+  void skipSpace() {
+    while (pos_ < s_.size() && (s_[pos_] == ' ' || s_[pos_] == '\t' || s_[pos_] == '\n' || s_[pos_] == '\r')) ++pos_;
+  }
+  bool matchWord(std::string_view w) {
+    if (s_.substr(pos_, w.size()) != w) return false;
+    pos_ += w.size();
+    return true;
+  }
+  bool parseString(std::string* out) {
+    const char q = peek();
+    if (q != '\'' && q != '"') return false;
+    const size_t end = s_.find(q, pos_ + 1);
+    if (end == std::string_view::npos) return false;
+    *out = std::string(s_.substr(pos_ + 1, end - pos_ - 1));
+    pos_ = end + 1;
+    return true;
+  }
+  std::string parseShape(std::vector<int64_t>* shape) {
+    shape->clear();
+    if (!eat('(')) return "header: 'shape' must be a tuple";
+    for (;;) {
+      skipSpace();
+      if (eat(')')) return {};
+      if (!std::isdigit(static_cast<unsigned char>(peek())))
+        return fmt::format("header: 'shape' holds a non-integer or negative extent at offset {}", pos_);
+      int64_t v = 0;
+      while (std::isdigit(static_cast<unsigned char>(peek()))) {
+        v = v * 10 + (s_[pos_++] - '0');
+        if (v > kMaxExtent) return "header: a shape extent is absurdly large";
+      }
+      if (eat('L')) {
+      }  // Python 2 long suffix, as old numpy wrote it
+      shape->push_back(v);
+      skipSpace();
+      if (eat(',')) continue;
+      skipSpace();
+      if (eat(')')) return {};
+      return fmt::format("header: malformed 'shape' tuple at offset {}", pos_);
+    }
+  }
+
+  std::string_view s_;
+  size_t pos_ = 0;
+};
+
+/// Bytes per element of a simple numpy dtype ("<f4" -> 4), or 0 if unsupported.
+size_t itemSize(std::string_view descr) {
+  if (!descr.empty() && (descr[0] == '<' || descr[0] == '>' || descr[0] == '|' || descr[0] == '=')) descr.remove_prefix(1);
+  if (descr.size() < 2 || std::strchr("biufc", descr[0]) == nullptr) return 0;
+  size_t n = 0;
+  for (char c : descr.substr(1)) {
+    if (!std::isdigit(static_cast<unsigned char>(c))) return 0;
+    n = n * 10 + size_t(c - '0');
+    if (n > 64) return 0;
+  }
+  return n;
+}
+
+/// Reads the fixed preamble (magic, version, header length). `prefix` must hold at least 12 bytes or the
+/// whole file. Sets the header text offset/length.
+std::string parsePreamble(std::string_view prefix, std::string_view name, size_t* header_start, size_t* header_len) {
+  if (prefix.size() < kMagicLen || std::memcmp(prefix.data(), kMagic, kMagicLen) != 0)
+    return fmt::format("{}: not a .npy file (missing the \\x93NUMPY magic)", name);
+  if (prefix.size() < 10) return fmt::format("{}: truncated .npy preamble", name);
+  const int major = static_cast<uint8_t>(prefix[6]);
+  const int minor = static_cast<uint8_t>(prefix[7]);
+  if ((major != 1 && major != 2 && major != 3) || minor != 0)
+    return fmt::format("{}: unsupported .npy format version {}.{} (expected 1.0, 2.0 or 3.0)", name, major, minor);
+  auto byte = [&](size_t i) { return size_t(static_cast<uint8_t>(prefix[i])); };
+  if (major == 1) {
+    *header_start = 10;
+    *header_len = byte(8) | (byte(9) << 8);
+  } else {
+    if (prefix.size() < 12) return fmt::format("{}: truncated .npy preamble", name);
+    *header_start = 12;
+    *header_len = byte(8) | (byte(9) << 8) | (byte(10) << 16) | (byte(11) << 24);
+  }
+  if (*header_len == 0) return fmt::format("{}: empty .npy header", name);
+  return {};
+}
+
+/// Parses the header dict and computes the payload size.
+std::string parseHeader(std::string_view header, std::string_view name, NpyArray* out, uint64_t* payload_bytes) {
+  for (char c : header)
+    if (c == '\0') return fmt::format("{}: .npy header contains a NUL byte", name);
+  std::string err = HeaderParser(header).parse(out);
+  if (!err.empty()) return fmt::format("{}: {}", name, err);
+  const size_t item = itemSize(out->descr);
+  if (item == 0) return fmt::format("{}: unsupported dtype '{}'", name, out->descr);
+  uint64_t n = item;
+  for (int64_t e : out->shape)
+    if (__builtin_mul_overflow(n, uint64_t(e), &n) || n > (uint64_t(1) << 46))
+      return fmt::format("{}: the array is too large", name);
+  *payload_bytes = n;
+  return {};
+}
+
+std::string shapeText(const std::vector<int64_t>& shape) {
+  std::string s = "(";
+  for (size_t i = 0; i < shape.size(); ++i) s += fmt::format("{}{}", i ? ", " : "", shape[i]);
+  if (shape.size() == 1) s += ",";
+  return s + ")";
+}
+
+/// Checks a parsed array is a C-order (Z, Y, X) volume and returns dims {X, Y, Z}.
+std::string volumeDims(const NpyArray& a, std::string_view name, Coord* dims) {
+  if (a.fortran_order) return fmt::format("{}: fortran_order arrays are not accepted (save a C-order array)", name);
+  if (a.shape.size() != 3)
+    return fmt::format("{}: expected a 3-D array of shape (Z, Y, X), got shape {}", name, shapeText(a.shape));
+  for (int64_t e : a.shape)
+    if (e < 1 || e > kMaxGridDim)
+      return fmt::format("{}: every extent must be in [1, {}], got shape {}", name, kMaxGridDim, shapeText(a.shape));
+  *dims = {int32_t(a.shape[2]), int32_t(a.shape[1]), int32_t(a.shape[0])};
+  return {};
+}
+
+std::string writeNpyFile(const std::string& path, std::string_view descr, const Coord& dims, const void* data,
+                         size_t bytes) {
+  const std::vector<int64_t> shape{dims.z, dims.y, dims.x};
+  std::string header = encodeNpy(descr, shape, nullptr, 0);
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  if (!f) return fmt::format("{}: cannot open for writing: {}", path, std::strerror(errno));
+  f.write(header.data(), static_cast<std::streamsize>(header.size()));
+  f.write(static_cast<const char*>(data), static_cast<std::streamsize>(bytes));
+  f.close();
+  if (!f) return fmt::format("{}: write failed: {}", path, std::strerror(errno));
+  return {};
+}
+
+}  // namespace
+
+std::string parseNpy(std::string_view bytes, std::string_view name, NpyArray* out) {
+  size_t start = 0, len = 0;
+  std::string err = parsePreamble(bytes, name, &start, &len);
+  if (!err.empty()) return err;
+  if (bytes.size() < start + len)
+    return fmt::format("{}: truncated .npy header ({} bytes declared, {} present)", name, len, bytes.size() - start);
+  NpyArray a;
+  uint64_t payload = 0;
+  err = parseHeader(bytes.substr(start, len), name, &a, &payload);
+  if (!err.empty()) return err;
+  const uint64_t have = bytes.size() - start - len;
+  if (have < payload)
+    return fmt::format("{}: truncated: shape {} of '{}' needs {} data bytes, the file holds {}", name,
+                       shapeText(a.shape), a.descr, payload, have);
+  if (have > payload)
+    return fmt::format("{}: {} unexpected bytes after the {} data bytes of shape {}", name, have - payload, payload,
+                       shapeText(a.shape));
+  const auto* p = reinterpret_cast<const uint8_t*>(bytes.data()) + start + len;
+  a.data.assign(p, p + payload);
+  *out = std::move(a);
+  return {};
+}
+
+std::string readNpy(const std::string& path, NpyArray* out) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return fmt::format("{}: cannot open: {}", path, std::strerror(errno));
+  f.seekg(0, std::ios::end);
+  const std::streamoff file_size = f.tellg();
+  f.seekg(0, std::ios::beg);
+  if (file_size < 0) return fmt::format("{}: cannot determine the file size", path);
+  // The preamble is 10 (v1) or 12 (v2/3) bytes; read what exists and let parsePreamble judge.
+  std::string pre(static_cast<size_t>(std::min<std::streamoff>(file_size, 12)), '\0');
+  f.read(pre.data(), static_cast<std::streamsize>(pre.size()));
+  if (!f) return fmt::format("{}: read failed", path);
+  size_t start = 0, len = 0;
+  std::string err = parsePreamble(pre, path, &start, &len);
+  if (!err.empty()) return err;
+  if (uint64_t(file_size) < start + len)
+    return fmt::format("{}: truncated .npy header ({} bytes declared, {} present)", path, len,
+                       uint64_t(file_size) - std::min<uint64_t>(start, uint64_t(file_size)));
+  std::string header(len, '\0');
+  f.seekg(static_cast<std::streamoff>(start), std::ios::beg);
+  f.read(header.data(), static_cast<std::streamsize>(len));
+  if (!f) return fmt::format("{}: read failed", path);
+  NpyArray a;
+  uint64_t payload = 0;
+  err = parseHeader(header, path, &a, &payload);
+  if (!err.empty()) return err;
+  const uint64_t have = uint64_t(file_size) - start - len;
+  if (have < payload)
+    return fmt::format("{}: truncated: shape {} of '{}' needs {} data bytes, the file holds {}", path,
+                       shapeText(a.shape), a.descr, payload, have);
+  if (have > payload)
+    return fmt::format("{}: {} unexpected bytes after the {} data bytes of shape {}", path, have - payload, payload,
+                       shapeText(a.shape));
+  a.data.resize(payload);
+  f.read(reinterpret_cast<char*>(a.data.data()), static_cast<std::streamsize>(payload));
+  if (!f) return fmt::format("{}: read failed while loading {} data bytes", path, payload);
+  *out = std::move(a);
+  return {};
+}
+
+std::string readNpyMask(const std::string& path, std::vector<uint8_t>* mask, Coord* dims) {
+  NpyArray a;
+  std::string err = readNpy(path, &a);
+  if (!err.empty()) return err;
+  const std::string_view d = a.descr;
+  const bool one_byte = d.size() == 3 && std::strchr("|<>=", d[0]) != nullptr;
+  if (!one_byte || (d.substr(1) != "u1" && d.substr(1) != "b1"))
+    return fmt::format("{}: a seed mask must have dtype uint8 or bool, got '{}'", path, a.descr);
+  Coord c;
+  err = volumeDims(a, path, &c);
+  if (!err.empty()) return err;
+  *mask = std::move(a.data);
+  *dims = c;
+  return {};
+}
+
+std::string readNpyFloat32(const std::string& path, std::vector<float>* values, Coord* dims) {
+  NpyArray a;
+  std::string err = readNpy(path, &a);
+  if (!err.empty()) return err;
+  if (a.descr != "<f4" && a.descr != "=f4")
+    return fmt::format("{}: expected dtype little-endian float32 ('<f4'), got '{}'", path, a.descr);
+  Coord c;
+  err = volumeDims(a, path, &c);
+  if (!err.empty()) return err;
+  std::vector<float> v(a.data.size() / sizeof(float));
+  std::memcpy(v.data(), a.data.data(), v.size() * sizeof(float));
+  *values = std::move(v);
+  *dims = c;
+  return {};
+}
+
+std::string encodeNpy(std::string_view descr, const std::vector<int64_t>& shape, const void* data, size_t bytes) {
+  std::string dict = fmt::format("{{'descr': '{}', 'fortran_order': False, 'shape': {}, }}", descr, shapeText(shape));
+  // Pad with spaces so magic + version + length + header + '\n' is a multiple of 64 (numpy.save's alignment).
+  size_t preamble = 10;
+  size_t total = preamble + dict.size() + 1;
+  if ((total + 63) / 64 * 64 - preamble > 65535) preamble = 12;
+  total = preamble + dict.size() + 1;
+  const size_t padded = (total + 63) / 64 * 64;
+  dict.append(padded - total, ' ');
+  dict.push_back('\n');
+  const size_t hlen = dict.size();
+  std::string out(kMagic, kMagicLen);
+  out.push_back(static_cast<char>(preamble == 10 ? 1 : 2));
+  out.push_back('\0');
+  out.push_back(static_cast<char>(hlen & 0xff));
+  out.push_back(static_cast<char>((hlen >> 8) & 0xff));
+  if (preamble == 12) {
+    out.push_back(static_cast<char>((hlen >> 16) & 0xff));
+    out.push_back(static_cast<char>((hlen >> 24) & 0xff));
+  }
+  out += dict;
+  if (bytes) out.append(static_cast<const char*>(data), bytes);
+  return out;
+}
+
+std::string writeNpyFloat32(const std::string& path, const std::vector<float>& values, const Coord& dims) {
+  if (int64_t(values.size()) != int64_t(dims.x) * dims.y * dims.z)
+    return fmt::format("{}: {} values do not fill dims {}x{}x{}", path, values.size(), dims.x, dims.y, dims.z);
+  static_assert(std::numeric_limits<float>::is_iec559, "float32 output assumes IEEE-754 floats");
+  return writeNpyFile(path, "<f4", dims, values.data(), values.size() * sizeof(float));
+}
+
+std::string writeNpyMask(const std::string& path, const std::vector<uint8_t>& mask, const Coord& dims) {
+  if (int64_t(mask.size()) != int64_t(dims.x) * dims.y * dims.z)
+    return fmt::format("{}: {} bytes do not fill dims {}x{}x{}", path, mask.size(), dims.x, dims.y, dims.z);
+  return writeNpyFile(path, "|u1", dims, mask.data(), mask.size());
+}
+
+}  // namespace distband

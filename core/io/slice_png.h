@@ -1,0 +1,95 @@
+// Slice PNG: writes one axis-aligned slice of a distance field as a colour-mapped 8-bit RGB PNG for people.
+// Contract:
+//   * The field is given as a sampling function over the voxels of a Grid (or as a DenseField). Only the voxels
+//     of the requested slice are sampled, once each, on the calling thread.
+//   * Colour map (diverging, saturating): a value v maps to t = clamp(v / limit, -1, 1); t < 0 (inside) blends
+//     from white to kSliceInsideColour, t > 0 (outside) from white to kSliceOutsideColour; |v| >= limit is the
+//     full colour. Non-finite values are drawn kSliceInvalidColour.
+//   * Zero contour (black): between every pair of 4-neighbours in the slice whose signs differ (v < 0 versus
+//     v >= 0), the voxel nearer zero (ties: the inside one) is drawn black — a one-voxel line on the side of the
+//     true surface. A distance field is 1-Lipschitz, so a real crossing has |a - b| <= h; pairs that jump by
+//     more than `contour_max_jump_world` (default 2h) are background/limit seams, not surfaces, and are skipped.
+//   * Orientation: for axis z the image's columns are x and its rows y; for axis y, columns x and rows z; for
+//     axis x, columns y and rows z. Row 0 (the top) is the largest row coordinate, so "up" is +row axis, as in
+//     a plot. Every voxel becomes a scale x scale block of pixels.
+//   * The file is written to a temporary file in the same directory and renamed over `path`, so an
+//     interrupted run never leaves a partial PNG.
+//   * Errors (bad axis or index, bad options, I/O) come back as a non-empty message; nothing is thrown for them.
+//   * Limited fields: a DenseField holds +background everywhere not delivered, so its inside beyond the limit
+//     shows as outside (the contour check above keeps that seam out of the contour). A VdbFieldBuilder grid after
+//     finish() (signed flood fill) reads -background there; sample it through an accessor, e.g.
+//     [&acc](const Coord& c) { return acc.getValue(openvdb::Coord(c.x, c.y, c.z)); }, for correct inside colours.
+// Thread-safety: the functions are re-entrant; the sampler is called from the calling thread only.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <string_view>
+
+#include "core/dense_field.h"
+#include "core/grid.h"
+#include "core/types.h"
+
+namespace distband {
+
+using Rgb8 = std::array<uint8_t, 3>;
+inline constexpr Rgb8 kSliceInsideColour{33, 102, 172};   ///< saturated negative (inside) colour
+inline constexpr Rgb8 kSliceOutsideColour{178, 24, 43};   ///< saturated positive (outside) colour
+inline constexpr Rgb8 kSliceZeroColour{255, 255, 255};    ///< colour at distance 0
+inline constexpr Rgb8 kSliceContourColour{0, 0, 0};       ///< the zero contour
+inline constexpr Rgb8 kSliceInvalidColour{128, 128, 128}; ///< NaN / infinite samples
+
+/// Largest image edge (pixels) the writer produces; protects against absurd scale requests.
+inline constexpr int kSliceMaxImageEdge = 16384;
+
+/// An axis-aligned slice: axis 0 = x, 1 = y, 2 = z; index is the voxel index along that axis.
+struct SliceSpec {
+  int axis = 2;
+  int index = 0;
+};
+
+/// Parses "AXIS:INDEX" (axis x|y|z, case-insensitive; index a non-negative integer, or "mid" for the middle
+/// slice, resolved against a grid by resolveSlice). Returns "" on success, otherwise why not.
+/// A "mid" index is stored as -1.
+std::string parseSliceSpec(std::string_view text, SliceSpec* spec);
+
+/// Checks the slice against the grid (and resolves index -1 = "mid" to dims/2). Returns "" or why not.
+std::string resolveSlice(const Grid& grid, SliceSpec* spec);
+
+struct SlicePngOptions {
+  /// Distance (world units) at which the colours saturate. <= 0 or non-finite: the largest finite |value| in
+  /// the slice (1 if the slice is all zero).
+  double limit_world = 0;
+  /// Pixels per voxel along each axis. 0: automatic — the smallest factor making the longer image edge at
+  /// least 512 pixels, capped at 16.
+  int scale = 0;
+  bool draw_contour = true;
+  /// Largest |a - b| (world units) of a sign-changing neighbour pair that still counts as a zero crossing.
+  /// <= 0: 2 * voxel size. Infinity: every sign change is drawn.
+  double contour_max_jump_world = 0;
+};
+
+/// What was written (for logs and tests).
+struct SlicePngInfo {
+  int width = 0, height = 0;  ///< image size in pixels
+  int scale = 1;              ///< pixels per voxel used
+  double limit_world = 0;     ///< saturation distance used
+  int64_t contour_voxels = 0; ///< voxels drawn as zero contour
+};
+
+using VoxelSampler = std::function<float(const Coord&)>;
+
+/// Maps a value to its colour (exposed so tests and docs share the exact map).
+Rgb8 sliceColour(float value, double limit_world);
+
+/// Writes the slice `spec` of the field `sample` over `grid` to `path`. Returns "" on success.
+std::string writeSlicePng(const std::string& path, const Grid& grid, const VoxelSampler& sample, SliceSpec spec,
+                          const SlicePngOptions& options = {}, SlicePngInfo* info = nullptr);
+
+/// Same for a dense field (its own grid).
+std::string writeSlicePng(const std::string& path, const DenseField& field, SliceSpec spec,
+                          const SlicePngOptions& options = {}, SlicePngInfo* info = nullptr);
+
+}  // namespace distband
