@@ -67,6 +67,7 @@ std::string validateOptions(const Grid& grid, const EngineOptions& o) {
 namespace {
 
 constexpr uint64_t kUntouched = ~uint64_t(0);
+constexpr uint32_t kOutsideGrid = ~uint32_t(0);
 constexpr uint16_t kNeverExpires = 0xFFFF;
 constexpr uint16_t kNoStamp = 0xFFFF;
 constexpr int kMaxSteps = 65000;  // expiry and stamps are 16-bit step numbers
@@ -149,7 +150,20 @@ class BandRun {
         table_(size_t(bdims_.x) * bdims_.y * bdims_.z),
         region_(seeds.region ? seeds.region->data() : nullptr) {
     for (auto& p : table_) p.store(nullptr, std::memory_order_relaxed);
-    for (const Coord& l : stencil_.links) links_.push_back({l.x, l.y, l.z, l.x * 64 + l.y * 8 + l.z, !stencil_.fcc});
+    for (const Coord& l : stencil_.links)
+      links_.push_back({l.x, l.y, l.z, l.x * 64 + l.y * 8 + l.z, 13, double(l.x), double(l.y), double(l.z),
+                        !stencil_.fcc});
+    for (int c = 0; c < 27; ++c) {
+      const int rep_local[3] = {0, 1, kBrickSize - 1};  // a representative local coordinate of each class
+      const Coord src{rep_local[c % 3], rep_local[(c / 3) % 3], rep_local[c / 9]};
+      for (Link link : links_) {
+        const int lx = src.x + link.x, ly = src.y + link.y, lz = src.z + link.z;
+        const int sx = lx >> kBrickLog2, sy = ly >> kBrickLog2, sz = lz >> kBrickLog2;
+        link.brick = (sz + 1) * 9 + (sy + 1) * 3 + (sx + 1);
+        link.offset = brickOffset(lx & 7, ly & 7, lz & 7) - brickOffset(src.x, src.y, src.z);
+        class_links_[c].push_back(link);
+      }
+    }
     if (opt.mode == PropagationMode::kPaper) {
       alpha_ = opt.lifespan_alpha < 0 ? stencil_.alpha : opt.lifespan_alpha;
       margin_ = opt.lifespan_margin < 0 ? defaultLifespanMargin(opt.stencil) : opt.lifespan_margin;
@@ -238,8 +252,8 @@ class BandRun {
   }
 
   void pushFrom(const FrontEntry& e, ThreadBuffers& tb);
-  template <bool kInterior, bool kPoints>
-  void pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb);
+  template <bool kPoints>
+  void pushFromT(const FrontEntry& e, ThreadBuffers& tb);
   void insertBand();
   void step(std::vector<FrontEntry>& front);
   std::vector<FrontEntry> correct(bool first_round);
@@ -257,10 +271,15 @@ class BandRun {
   std::vector<std::atomic<BrickState*>> table_;
   const uint8_t* region_;
   struct Link {
-    int x, y, z, offset;
+    int x, y, z;
+    int offset;          // added to the source's brick offset: the target's offset in its own brick
+    int brick;           // which of the 3x3x3 neighbouring bricks holds the target (13: the same one)
+    double fx, fy, fz;   // the link as doubles, so point-site distances need no conversions
     bool propagates_to;  // true when the target always propagates (every cubic stencil)
   };
   std::vector<Link> links_;
+  // links_ specialised for each position class of the source in its brick: per axis local 0, 1..6 or 7.
+  std::vector<Link> class_links_[27];
   double alpha_ = 0;
   int margin_ = 0;
   double max_link_ = 1;     // longest link between propagating voxels (voxels per step at best)
@@ -285,26 +304,16 @@ class BandRun {
 };
 
 void BandRun::pushFrom(const FrontEntry& e, ThreadBuffers& tb) {
-  BrickState* pb = table_[e.brick].load(std::memory_order_relaxed);
-  const Coord l = brickLocal(e.offset);
-  // Fast path: every neighbour lies in this brick, which lies wholly inside the grid.
-  const bool interior = l.x >= 1 && l.x <= 6 && l.y >= 1 && l.y <= 6 && l.z >= 1 && l.z <= 6 &&
-                        pb->origin.x + kBrickSize <= dims_.x && pb->origin.y + kBrickSize <= dims_.y &&
-                        pb->origin.z + kBrickSize <= dims_.z;
-  const bool points = seeds_.kind == SiteKind::kPoint;
-  if (interior) {
-    if (points) pushFromT<true, true>(e, pb, tb);
-    else pushFromT<true, false>(e, pb, tb);
-  } else {
-    if (points) pushFromT<false, true>(e, pb, tb);
-    else pushFromT<false, false>(e, pb, tb);
-  }
+  if (seeds_.kind == SiteKind::kPoint) pushFromT<true>(e, tb);
+  else pushFromT<false>(e, tb);
 }
 
-template <bool kInterior, bool kPoints>
-void BandRun::pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb) {
+template <bool kPoints>
+void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   // Members copied to locals: the atomics and buffer writes below would otherwise force reloads every link.
-  const Coord p = pb->origin + brickLocal(e.offset);
+  BrickState* const pb = table_[e.brick].load(std::memory_order_relaxed);
+  const Coord l = brickLocal(e.offset);
+  const Coord p = pb->origin + l;
   const uint32_t site = e.site;
   const uint8_t* const region_map = region_;
   const uint8_t region = regionOf(p);
@@ -315,35 +324,46 @@ void BandRun::pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb) 
   // Point sites: the offset from the site to p, so a neighbour's squared distance is three multiply-adds.
   Vec3d rel{};
   if constexpr (kPoints) rel = Vec3d{double(p.x), double(p.y), double(p.z)} - seeds_.points[site];
+  // Only a brick reaching past the grid's far faces needs per-voxel bounds checks (the near faces are brick
+  // faces, handled by the neighbouring-brick lookup).
+  const bool edge = pb->origin.x + kBrickSize > dims_.x || pb->origin.y + kBrickSize > dims_.y ||
+                    pb->origin.z + kBrickSize > dims_.z;
+  auto cls = [](int v) { return v == 0 ? 0 : (v == kBrickSize - 1 ? 2 : 1); };
+  const std::vector<Link>& links = class_links_[cls(l.z) * 9 + cls(l.y) * 3 + cls(l.x)];
+  // The 3x3x3 neighbouring bricks, looked up once each on demand.
+  uint32_t nbr_index[27];
+  uint32_t known = 1u << 13;  // bit i: nbr_index[i] valid; 13 is this brick
+  nbr_index[13] = e.brick;
+  const Coord bcoord{pb->origin.x >> kBrickLog2, pb->origin.y >> kBrickLog2, pb->origin.z >> kBrickLog2};
   bool deferred = false;
-  const Link* const links = links_.data();
-  const size_t n = links_.size();
-  for (size_t li = 0; li < n; ++li) {
-    const Link& d = links[li];
-    const Coord g{p.x + d.x, p.y + d.y, p.z + d.z};
-    BrickState* gb;
-    uint32_t gbi;
-    int goff;
-    if constexpr (kInterior) {
-      gb = pb;
-      gbi = e.brick;
-      goff = e.offset + d.offset;
-    } else {
-      if (uint32_t(g.x) >= dx || uint32_t(g.y) >= dy || uint32_t(g.z) >= dz) continue;
-      gbi = brickIndex(g.x, g.y, g.z);
+  for (const Link& d : links) {
+    if (edge && (uint32_t(p.x + d.x) >= dx || uint32_t(p.y + d.y) >= dy || uint32_t(p.z + d.z) >= dz)) continue;
+    const int goff = e.offset + d.offset;
+    BrickState* gb = pb;
+    uint32_t gbi = e.brick;
+    if (d.brick != 13) {
+      if (!(known & (1u << d.brick))) {
+        known |= 1u << d.brick;
+        const int bx = bcoord.x + d.brick % 3 - 1, by = bcoord.y + (d.brick / 3) % 3 - 1,
+                  bz = bcoord.z + d.brick / 9 - 1;
+        nbr_index[d.brick] = (bx < 0 || by < 0 || bz < 0 || bx >= bdims_.x || by >= bdims_.y || bz >= bdims_.z)
+                                 ? kOutsideGrid
+                                 : uint32_t((size_t(bz) * bdims_.y + by) * bdims_.x + bx);
+      }
+      gbi = nbr_index[d.brick];
+      if (gbi == kOutsideGrid) continue;
       gb = table_[gbi].load(std::memory_order_acquire);
-      goff = brickOffset(g.x & 7, g.y & 7, g.z & 7);
     }
-    if (region_map && region_map[grid_.denseIndex(g)] != region) continue;
+    if (region_map && region_map[grid_.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
     const uint64_t k = gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched;
     // The same site gives the same distance: nothing to offer and no boundary here.
     if (k != kUntouched && keySite(k) == site) continue;
     float d2;
     if constexpr (kPoints) {
-      const double x = rel.x + d.x, y = rel.y + d.y, z = rel.z + d.z;
+      const double x = rel.x + d.fx, y = rel.y + d.fy, z = rel.z + d.fz;
       d2 = float(x * x + y * y + z * z);
     } else {
-      d2 = metric_.key2(site, g.x, g.y, g.z);
+      d2 = metric_.key2(site, p.x + d.x, p.y + d.y, p.z + d.z);
     }
     const uint64_t newkey = packKey(d2, site);
     if (k != kUntouched) {
@@ -365,7 +385,8 @@ void BandRun::pushFromT(const FrontEntry& e, BrickState* pb, ThreadBuffers& tb) 
       continue;
     }
     if (!gb) gb = getOrCreate(gbi, tb);
-    if (!offer(gb, gbi, goff, newkey, d.propagates_to || stencil_.propagates(g), tb) && track &&
+    const bool propagates = d.propagates_to || stencil_.propagates({p.x + d.x, p.y + d.y, p.z + d.z});
+    if (!offer(gb, gbi, goff, newkey, propagates, tb) && track &&
         keySite(gb->key[goff].load(std::memory_order_relaxed)) != site) {
       // Lost a race to a better, different site offered in this very step.
       mark(pb, e.brick, e.offset, tb);
