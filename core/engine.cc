@@ -66,7 +66,28 @@ std::string validateOptions(const Grid& grid, const EngineOptions& o) {
 
 namespace {
 
+// ---- Per-voxel key ------------------------------------------------------------------------------------------------
+// 64 bits: float squared distance (voxels) | 27-bit site | 5-bit source direction. Positive floats order like their
+// bit patterns, so "better" is an integer minimum and one atomic CAS updates everything together; distance ties go
+// to the lower site, which keeps the field independent of thread scheduling. The direction is a stencil link along
+// which the held site was offered (kNoDirection for the band, corrections and replays); an offer of the site a voxel
+// already holds is never taken, so which valid direction is kept may vary, but it only selects offers that would be
+// redundant either way (see buildLinkTables).
 constexpr uint64_t kUntouched = ~uint64_t(0);
+constexpr int kSiteBits = 27;
+constexpr uint32_t kSiteMask = (1u << kSiteBits) - 1;
+constexpr uint32_t kNoSiteKey = kSiteMask;  // kNoSite in the key
+constexpr uint32_t kMaxSites = kSiteMask;   // site ids must stay below this
+constexpr uint32_t kNoDirection = 31;
+
+inline uint64_t packKey(float d2, uint32_t dir, uint32_t site) {
+  return (uint64_t(std::bit_cast<uint32_t>(d2)) << 32) | (uint64_t(site) << 5) | dir;
+}
+inline float keyDist2(uint64_t k) { return std::bit_cast<float>(uint32_t(k >> 32)); }
+inline uint32_t keySite(uint64_t k) { return uint32_t(k) >> 5; }
+inline uint32_t keyDir(uint64_t k) { return uint32_t(k) & 31; }
+inline uint32_t toKeySite(uint32_t site) { return site == kNoSite ? kNoSiteKey : site; }
+
 constexpr uint32_t kOutsideGrid = ~uint32_t(0);
 constexpr uint16_t kNeverExpires = 0xFFFF;
 constexpr uint16_t kNoStamp = 0xFFFF;
@@ -74,14 +95,9 @@ constexpr int kMaxSteps = 65000;  // expiry and stamps are 16-bit step numbers
 // Offers are admitted this many voxels beyond the segment threshold (and the limit), while only voxels within the
 // threshold are frozen and delivered: a closest site whose path briefly runs outside the threshold still arrives.
 constexpr double kAdmitSlackVoxels = 2.0;
-constexpr uint8_t kMarked = 1;    // saw two different sites: a Voronoi-boundary candidate for the correction
 constexpr uint8_t kEmitted = 2;
 constexpr uint8_t kDirty = 4;   // changed since the last correction round (listed in ThreadBuffers::dirty)
 constexpr uint8_t kQueued = 8;  // already a candidate of the current correction round
-
-inline uint64_t packKey(float d2, uint32_t site) { return (uint64_t(std::bit_cast<uint32_t>(d2)) << 32) | site; }
-inline float keyDist2(uint64_t k) { return std::bit_cast<float>(uint32_t(k >> 32)); }
-inline uint32_t keySite(uint64_t k) { return uint32_t(k); }
 
 struct BrickState {
   explicit BrickState(Coord o) : origin(o) {
@@ -105,18 +121,20 @@ struct VoxelRef {
   uint16_t offset;
 };
 
+/// A voxel that offers a site: the site and the direction it arrived from, as of the end of the previous step.
 struct FrontEntry {
   uint32_t brick;
   uint16_t offset;
+  uint8_t dir;
   uint32_t site;
 };
 
 struct ThreadBuffers {
   std::vector<FrontEntry> next;       // voxels changed in this step (site filled in after the step)
   std::vector<FrontEntry> deferred;   // offers held back beyond the admission threshold (voxel, site)
-  std::vector<VoxelRef> marked;       // newly marked Voronoi-boundary candidates
   std::vector<uint32_t> pending;      // bricks that got their first unemitted voxel
   std::vector<BrickState*> allocated;
+  std::vector<VoxelRef> candidates;   // correction candidates found by a scan
   std::vector<std::pair<VoxelRef, uint64_t>> corrections;
   std::vector<VoxelRef> dirty;        // changed since the last correction round (exact mode)
   int64_t updates = 0;
@@ -124,9 +142,9 @@ struct ThreadBuffers {
 
 struct SiteMetric {
   const Seeds& seeds;
-  // Squared distance in voxels from voxel (x,y,z) to a site, in double (the emitted value) ...
+  // Squared distance in voxels from voxel (x,y,z) to a site (key form), in double (the emitted value) ...
   double dist2(uint32_t site, double x, double y, double z) const {
-    if (site == kNoSite) return 0.0;
+    if (site == kNoSiteKey) return 0.0;
     const Vec3d p{x, y, z};
     if (seeds.kind == SiteKind::kPoint) return (p - seeds.points[site]).lengthSqr();
     const auto& t = seeds.triangles[site];
@@ -150,28 +168,16 @@ class BandRun {
         table_(size_t(bdims_.x) * bdims_.y * bdims_.z),
         region_(seeds.region ? seeds.region->data() : nullptr) {
     for (auto& p : table_) p.store(nullptr, std::memory_order_relaxed);
-    for (const Coord& l : stencil_.links)
-      links_.push_back({l.x, l.y, l.z, l.x * 64 + l.y * 8 + l.z, 13, double(l.x), double(l.y), double(l.z),
-                        !stencil_.fcc});
-    for (int c = 0; c < 27; ++c) {
-      const int rep_local[3] = {0, 1, kBrickSize - 1};  // a representative local coordinate of each class
-      const Coord src{rep_local[c % 3], rep_local[(c / 3) % 3], rep_local[c / 9]};
-      for (Link link : links_) {
-        const int lx = src.x + link.x, ly = src.y + link.y, lz = src.z + link.z;
-        const int sx = lx >> kBrickLog2, sy = ly >> kBrickLog2, sz = lz >> kBrickLog2;
-        link.brick = (sz + 1) * 9 + (sy + 1) * 3 + (sx + 1);
-        link.offset = brickOffset(lx & 7, ly & 7, lz & 7) - brickOffset(src.x, src.y, src.z);
-        class_links_[c].push_back(link);
-      }
-    }
+    buildLinkTables();
     if (opt.mode == PropagationMode::kPaper) {
       alpha_ = opt.lifespan_alpha < 0 ? stencil_.alpha : opt.lifespan_alpha;
       margin_ = opt.lifespan_margin < 0 ? defaultLifespanMargin(opt.stencil) : opt.lifespan_margin;
       use_lifespan_ = std::isfinite(alpha_);
-      max_link_ = stencil_.fcc ? std::sqrt(2.0) : 0.0;
-      if (!stencil_.fcc)
-        for (const Coord& l : stencil_.links) max_link_ = std::max(max_link_, std::sqrt(double(l.x * l.x + l.y * l.y + l.z * l.z)));
     }
+    max_link_ = stencil_.fcc ? std::sqrt(2.0) : 0.0;
+    if (!stencil_.fcc)
+      for (const Coord& l : stencil_.links)
+        max_link_ = std::max(max_link_, std::sqrt(double(l.x * l.x + l.y * l.y + l.z * l.z)));
     const double h = grid.voxelSize();
     limit_vox_ = opt.limit_world / h;
     segment_vox_ = opt.segment_length_world / h;
@@ -184,6 +190,21 @@ class BandRun {
   EngineResult run();
 
  private:
+  struct Link {
+    int x, y, z;
+    int offset;          // added to the source's brick offset: the target's offset in its own brick
+    int brick;           // which of the 3x3x3 neighbouring bricks holds the target (13: the same one)
+    uint32_t dir;        // index of the link in the stencil (stored in the target's key)
+    double fx, fy, fz;   // the link as doubles, so point-site distances need no conversions
+    bool propagates_to;  // true when the target always propagates (every cubic stencil)
+  };
+
+  void buildLinkTables();
+  const std::vector<Link>& linksFor(const Coord& local, uint32_t dir) const {
+    auto cls = [](int v) { return v == 0 ? 0 : (v == kBrickSize - 1 ? 2 : 1); };
+    return link_tables_[(cls(local.z) * 9 + cls(local.y) * 3 + cls(local.x)) * 32 + dir];
+  }
+
   uint32_t brickIndex(int x, int y, int z) const {
     return uint32_t(((z >> kBrickLog2) * bdims_.y + (y >> kBrickLog2)) * bdims_.x + (x >> kBrickLog2));
   }
@@ -192,6 +213,11 @@ class BandRun {
     return {bx << kBrickLog2, by << kBrickLog2, bz << kBrickLog2};
   }
   uint8_t regionOf(const Coord& c) const { return region_ ? region_[grid_.denseIndex(c)] : 0; }
+  uint64_t keyAt(const Coord& c) const {
+    if (!grid_.contains(c)) return kUntouched;
+    BrickState* b = table_[brickIndex(c.x, c.y, c.z)].load(std::memory_order_relaxed);
+    return b ? b->key[brickOffset(c.x & 7, c.y & 7, c.z & 7)].load(std::memory_order_relaxed) : kUntouched;
+  }
 
   BrickState* getOrCreate(uint32_t bi, ThreadBuffers& tb) {
     BrickState* b = table_[bi].load(std::memory_order_acquire);
@@ -215,12 +241,6 @@ class BandRun {
     return uint16_t(std::min(exp, double(kMaxSteps)));
   }
 
-  void mark(BrickState* b, uint32_t bi, int off, ThreadBuffers& tb) {
-    if (!(b->flags[off].load(std::memory_order_relaxed) & kMarked) &&
-        !(b->flags[off].fetch_or(kMarked, std::memory_order_relaxed) & kMarked))
-      tb.marked.push_back({bi, uint16_t(off)});
-  }
-
   // Offers `newkey` to voxel (b, off). Returns true when it lowered the voxel's key.
   bool offer(BrickState* b, uint32_t bi, int off, uint64_t newkey, bool propagates, ThreadBuffers& tb) {
     uint64_t k = b->key[off].load(std::memory_order_relaxed);
@@ -230,11 +250,6 @@ class BandRun {
         if (k == kUntouched) {
           if (use_lifespan_) b->expiry[off].store(expiryFor(keyDist2(newkey)), std::memory_order_relaxed);
           if (!b->pending.load(std::memory_order_relaxed) && !b->pending.exchange(true)) tb.pending.push_back(bi);
-        } else if (track_marks_ && !propagates && keySite(k) != keySite(newkey)) {
-          // A voxel that never offers its site (FCC's odd half) cannot meet a different neighbour site through a
-          // rejected offer of its own, so a replacement marks it. Propagating voxels are marked by the rejection
-          // that two final, different neighbour sites always produce.
-          mark(b, bi, off, tb);
         }
         if (collect_dirty_ && !(b->flags[off].load(std::memory_order_relaxed) & kDirty) &&
             !(b->flags[off].fetch_or(kDirty, std::memory_order_relaxed) & kDirty))
@@ -243,7 +258,7 @@ class BandRun {
         // offers the same snapshot site twice, which changes nothing.
         if (propagates && b->stamp[off].load(std::memory_order_relaxed) != uint16_t(step_)) {
           b->stamp[off].store(uint16_t(step_), std::memory_order_relaxed);
-          tb.next.push_back({bi, uint16_t(off), 0});
+          tb.next.push_back({bi, uint16_t(off), 0, 0});
         }
         return true;
       }
@@ -256,10 +271,13 @@ class BandRun {
   void pushFromT(const FrontEntry& e, ThreadBuffers& tb);
   void insertBand();
   void step(std::vector<FrontEntry>& front);
+  bool isBoundary(const Coord& q, uint64_t k) const;
+  std::vector<VoxelRef> scanCandidates();
   std::vector<FrontEntry> correct(bool first_round);
   void gatherBlock(const Coord& q, uint64_t* block) const;
   bool emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats);
   void rearmLifespans();
+  void collectPending();
 
   const Grid& grid_;
   const Seeds& seeds_;
@@ -270,22 +288,16 @@ class BandRun {
   Coord dims_, bdims_;
   std::vector<std::atomic<BrickState*>> table_;
   const uint8_t* region_;
-  struct Link {
-    int x, y, z;
-    int offset;          // added to the source's brick offset: the target's offset in its own brick
-    int brick;           // which of the 3x3x3 neighbouring bricks holds the target (13: the same one)
-    double fx, fy, fz;   // the link as doubles, so point-site distances need no conversions
-    bool propagates_to;  // true when the target always propagates (every cubic stencil)
-  };
   std::vector<Link> links_;
-  // links_ specialised for each position class of the source in its brick: per axis local 0, 1..6 or 7.
-  std::vector<Link> class_links_[27];
+  // links_ specialised for each position class of the source in its brick (per axis local 0, 1..6 or 7) and each
+  // arrival direction: links whose target the previous offerer already reached with the same site are dropped.
+  std::vector<Link> link_tables_[27 * 32];
   double alpha_ = 0;
   int margin_ = 0;
+  bool use_lifespan_ = false;
   double max_link_ = 1;     // longest link between propagating voxels (voxels per step at best)
   double lower_vox_ = 0;    // the current segment's lower distance bound
-  bool use_lifespan_ = false;
-  bool track_marks_ = false;
+  bool correcting_ = false;    // exact mode: second-ring correction at the end of each segment
   bool collect_dirty_ = false;  // after a segment's first correction round
   double limit_vox_ = 0, segment_vox_ = 0;
 
@@ -298,10 +310,42 @@ class BandRun {
 
   tbb::enumerable_thread_specific<ThreadBuffers> buffers_;
   std::vector<uint32_t> pending_bricks_;
-  std::vector<VoxelRef> marked_;
   std::vector<FrontEntry> deferred_;
   int64_t corrections_ = 0;
 };
+
+void BandRun::buildLinkTables() {
+  const std::vector<Coord>& sl = stencil_.links;
+  auto isLinkOrZero = [&](const Coord& v) {
+    if (v.x == 0 && v.y == 0 && v.z == 0) return true;
+    return std::find(sl.begin(), sl.end(), v) != sl.end();
+  };
+  for (size_t i = 0; i < sl.size(); ++i) {
+    const Coord& l = sl[i];
+    links_.push_back({l.x, l.y, l.z, l.x * 64 + l.y * 8 + l.z, 13, uint32_t(i), double(l.x), double(l.y), double(l.z),
+                      !stencil_.fcc});
+  }
+  const int rep_local[3] = {0, 1, kBrickSize - 1};  // a representative local coordinate of each class
+  for (int c = 0; c < 27; ++c) {
+    const Coord src{rep_local[c % 3], rep_local[(c / 3) % 3], rep_local[c / 9]};
+    for (uint32_t dir = 0; dir < 32; ++dir) {
+      if (dir != kNoDirection && dir >= sl.size()) continue;
+      for (Link link : links_) {
+        // The source received its site along link `dir` from Q = source - sl[dir], which offered the same site
+        // to all of its own links one step earlier: a target that is one of them (or Q) gains nothing.
+        if (dir != kNoDirection) {
+          const Coord& u = sl[dir];
+          if (isLinkOrZero({link.x + u.x, link.y + u.y, link.z + u.z})) continue;
+        }
+        const int lx = src.x + link.x, ly = src.y + link.y, lz = src.z + link.z;
+        const int sx = lx >> kBrickLog2, sy = ly >> kBrickLog2, sz = lz >> kBrickLog2;
+        link.brick = (sz + 1) * 9 + (sy + 1) * 3 + (sx + 1);
+        link.offset = brickOffset(lx & 7, ly & 7, lz & 7) - brickOffset(src.x, src.y, src.z);
+        link_tables_[c * 32 + dir].push_back(link);
+      }
+    }
+  }
+}
 
 void BandRun::pushFrom(const FrontEntry& e, ThreadBuffers& tb) {
   if (seeds_.kind == SiteKind::kPoint) pushFromT<true>(e, tb);
@@ -319,7 +363,7 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   const uint8_t region = regionOf(p);
   const uint32_t dx = uint32_t(dims_.x), dy = uint32_t(dims_.y), dz = uint32_t(dims_.z);
   const float admit2 = admit2_, frozen2 = frozen2_;
-  const bool track = track_marks_, lifespan = use_lifespan_, thr_is_limit = thr_is_limit_;
+  const bool lifespan = use_lifespan_, thr_is_limit = thr_is_limit_;
   const int step = step_;
   // Point sites: the offset from the site to p, so a neighbour's squared distance is three multiply-adds.
   Vec3d rel{};
@@ -328,15 +372,13 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   // faces, handled by the neighbouring-brick lookup).
   const bool edge = pb->origin.x + kBrickSize > dims_.x || pb->origin.y + kBrickSize > dims_.y ||
                     pb->origin.z + kBrickSize > dims_.z;
-  auto cls = [](int v) { return v == 0 ? 0 : (v == kBrickSize - 1 ? 2 : 1); };
-  const std::vector<Link>& links = class_links_[cls(l.z) * 9 + cls(l.y) * 3 + cls(l.x)];
   // The 3x3x3 neighbouring bricks, looked up once each on demand.
   uint32_t nbr_index[27];
   uint32_t known = 1u << 13;  // bit i: nbr_index[i] valid; 13 is this brick
   nbr_index[13] = e.brick;
   const Coord bcoord{pb->origin.x >> kBrickLog2, pb->origin.y >> kBrickLog2, pb->origin.z >> kBrickLog2};
   bool deferred = false;
-  for (const Link& d : links) {
+  for (const Link& d : linksFor(l, e.dir)) {
     if (edge && (uint32_t(p.x + d.x) >= dx || uint32_t(p.y + d.y) >= dy || uint32_t(p.z + d.z) >= dz)) continue;
     const int goff = e.offset + d.offset;
     BrickState* gb = pb;
@@ -356,7 +398,7 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
     }
     if (region_map && region_map[grid_.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
     const uint64_t k = gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched;
-    // The same site gives the same distance: nothing to offer and no boundary here.
+    // The same site gives the same distance: nothing to offer.
     if (k != kUntouched && keySite(k) == site) continue;
     float d2;
     if constexpr (kPoints) {
@@ -365,19 +407,9 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
     } else {
       d2 = metric_.key2(site, p.x + d.x, p.y + d.y, p.z + d.z);
     }
-    const uint64_t newkey = packKey(d2, site);
+    const uint64_t newkey = packKey(d2, d.dir, site);
     if (k != kUntouched) {
-      if (keyDist2(k) <= frozen2) {  // final: delivered in an earlier segment
-        if (track) mark(pb, e.brick, e.offset, tb);
-        continue;
-      }
-      if (newkey >= k) {
-        if (track) {
-          mark(pb, e.brick, e.offset, tb);
-          mark(gb, gbi, goff, tb);
-        }
-        continue;
-      }
+      if (newkey >= k || keyDist2(k) <= frozen2) continue;  // no better, or final (delivered)
       if (lifespan && step > gb->expiry[goff].load(std::memory_order_relaxed)) continue;  // FINISHED
     }
     if (d2 > admit2) {
@@ -385,19 +417,15 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
       continue;
     }
     if (!gb) gb = getOrCreate(gbi, tb);
-    const bool propagates = d.propagates_to || stencil_.propagates({p.x + d.x, p.y + d.y, p.z + d.z});
-    if (!offer(gb, gbi, goff, newkey, propagates, tb) && track &&
-        keySite(gb->key[goff].load(std::memory_order_relaxed)) != site) {
-      // Lost a race to a better, different site offered in this very step.
-      mark(pb, e.brick, e.offset, tb);
-      mark(gb, gbi, goff, tb);
-    }
+    offer(gb, gbi, goff, newkey, d.propagates_to || stencil_.propagates({p.x + d.x, p.y + d.y, p.z + d.z}), tb);
   }
-  if (deferred) tb.deferred.push_back(e);
+  if (deferred) tb.deferred.push_back({e.brick, e.offset, uint8_t(kNoDirection), site});
 }
 
 void BandRun::insertBand() {
   const auto& band = seeds_.band;
+  if (seeds_.siteCount() >= kMaxSites)
+    throw std::invalid_argument(fmt::format("too many sites ({}; at most {})", seeds_.siteCount(), kMaxSites - 1));
   const double admit_limit = limit_vox_ + kAdmitSlackVoxels;
   const float limit2 = std::isfinite(admit_limit) ? float(admit_limit * admit_limit) : INFINITY;
   for (const BandVoxel& v : band) {
@@ -412,13 +440,14 @@ void BandRun::insertBand() {
     ThreadBuffers& tb = buffers_.local();
     for (size_t i = r.begin(); i != r.end(); ++i) {
       const BandVoxel& v = band[i];
-      const float d2 = metric_.key2(v.site, v.voxel.x, v.voxel.y, v.voxel.z);
+      const uint32_t site = toKeySite(v.site);
+      const float d2 = metric_.key2(site, v.voxel.x, v.voxel.y, v.voxel.z);
       if (d2 > limit2) continue;
       const uint32_t bi = brickIndex(v.voxel.x, v.voxel.y, v.voxel.z);
       BrickState* b = getOrCreate(bi, tb);
       const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
       // Band voxels are first touched at step 0; kNoSite voxels (distance 0, nothing to offer) never push.
-      offer(b, bi, off, packKey(d2, v.site), v.site != kNoSite, tb);
+      offer(b, bi, off, packKey(d2, kNoDirection, site), site != kNoSiteKey, tb);
     }
   });
 }
@@ -430,32 +459,99 @@ void BandRun::step(std::vector<FrontEntry>& front) {
   });
 }
 
+// A voxel may hold a site that is not its closest only where different sites meet: true when a propagating stencil
+// neighbour (same region) holds a different site.
+bool BandRun::isBoundary(const Coord& q, uint64_t k) const {
+  const uint8_t region = regionOf(q);
+  for (const Link& d : links_) {
+    const Coord n{q.x - d.x, q.y - d.y, q.z - d.z};
+    if (!stencil_.propagates(n)) continue;
+    const uint64_t nk = keyAt(n);
+    if (nk == kUntouched || keySite(nk) == keySite(k) || keySite(nk) == kNoSiteKey) continue;
+    if (region_ && regionOf(n) != region) continue;
+    return true;
+  }
+  return false;
+}
+
+// All voxels of the current segment (delivered at its end) that sit where different sites meet. A brick whose
+// voxels all hold one site, like its 26 neighbours, has none and is skipped whole: far from Voronoi boundaries
+// (most of the volume for point seeds) the scan costs one pass over a brick's keys.
+std::vector<VoxelRef> BandRun::scanCandidates() {
+  const size_t n = pending_bricks_.size();
+  constexpr uint32_t kMixed = ~uint32_t(0), kEmpty = ~uint32_t(0) - 1;
+  std::vector<uint32_t> uniform(n);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
+      uint32_t u = kEmpty;
+      for (int off = 0; off < kBrickVoxels && u != kMixed; ++off) {
+        const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+        if (k == kUntouched) continue;
+        u = (u == kEmpty || u == keySite(k)) ? keySite(k) : kMixed;
+      }
+      uniform[i] = u;
+    }
+  });
+  // Uniform site of any brick by index (pending or not): non-pending bricks are scanned on demand.
+  auto uniformOf = [&](uint32_t bi, size_t hint) -> uint32_t {
+    if (hint < n && pending_bricks_[hint] == bi) return uniform[hint];
+    const auto it = std::lower_bound(pending_bricks_.begin(), pending_bricks_.end(), bi);
+    if (it != pending_bricks_.end() && *it == bi) return uniform[size_t(it - pending_bricks_.begin())];
+    BrickState* b = table_[bi].load(std::memory_order_relaxed);
+    if (!b) return kEmpty;
+    uint32_t u = kEmpty;
+    for (int off = 0; off < kBrickVoxels && u != kMixed; ++off) {
+      const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+      if (k == kUntouched) continue;
+      u = (u == kEmpty || u == keySite(k)) ? keySite(k) : kMixed;
+    }
+    return u;
+  };
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+    ThreadBuffers& tb = buffers_.local();
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const uint32_t bi = pending_bricks_[i];
+      BrickState* b = table_[bi].load(std::memory_order_relaxed);
+      if (uniform[i] != kMixed && !region_) {
+        bool all_same = true;
+        const Coord bc{b->origin.x >> kBrickLog2, b->origin.y >> kBrickLog2, b->origin.z >> kBrickLog2};
+        for (int dz = -1; dz <= 1 && all_same; ++dz)
+          for (int dy = -1; dy <= 1 && all_same; ++dy)
+            for (int dx = -1; dx <= 1 && all_same; ++dx) {
+              const int x = bc.x + dx, y = bc.y + dy, z = bc.z + dz;
+              if (x < 0 || y < 0 || z < 0 || x >= bdims_.x || y >= bdims_.y || z >= bdims_.z) continue;
+              const uint32_t u = uniformOf(uint32_t((size_t(z) * bdims_.y + y) * bdims_.x + x), n);
+              all_same = u == kEmpty || u == uniform[i];
+            }
+        if (all_same) continue;
+      }
+      for (int off = 0; off < kBrickVoxels; ++off) {
+        const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+        if (k == kUntouched || keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey) continue;
+        if (b->flags[off].load(std::memory_order_relaxed) & kEmitted) continue;
+        if (isBoundary(b->origin + brickLocal(off), k)) tb.candidates.push_back({bi, uint16_t(off)});
+      }
+    }
+  });
+  std::vector<VoxelRef> out;
+  for (auto& tb : buffers_) {
+    out.insert(out.end(), tb.candidates.begin(), tb.candidates.end());
+    tb.candidates.clear();
+  }
+  return out;
+}
+
 // The second-ring correction (exact mode). A voxel whose true closest site is held by none of its stencil
-// neighbours can only sit where different sites meet. Such a voxel, once inside the current segment, tries every
-// site held within Chebyshev distance 2. Which voxels are checked is decided by the field alone, so the result
-// does not depend on thread timing:
-//   * the first round of a segment checks every voxel with a propagating neighbour of a different site (marking
-//     guarantees each such voxel was marked when the two sites met there: the marked list is a superset);
-//   * later rounds check, with the same test, only voxels within distance 2 of a voxel changed since the last
-//     round (a deterministic set, since each step is deterministic).
+// neighbours sits where different sites meet; it tries every site held within Chebyshev distance 2. Which voxels
+// are checked is decided by the field alone, so the result does not depend on thread timing:
+//   * the first round of a segment checks every voxel of the segment at a site boundary (scanCandidates);
+//   * later rounds check only boundary voxels within distance 2 of a voxel changed since the last round.
 std::vector<FrontEntry> BandRun::correct(bool first_round) {
   std::vector<VoxelRef> candidates;
   if (first_round) {
-    for (auto& tb : buffers_) {
-      marked_.insert(marked_.end(), tb.marked.begin(), tb.marked.end());
-      tb.marked.clear();
-    }
-    // Delivered voxels leave the list; those beyond the threshold wait for their segment.
-    std::erase_if(marked_, [&](const VoxelRef& v) {
-      const float d2 = keyDist2(table_[v.brick].load(std::memory_order_relaxed)->key[v.offset].load(
-          std::memory_order_relaxed));
-      if (d2 <= frozen2_) return true;
-      if (d2 <= thr2_) {
-        candidates.push_back(v);
-        return true;
-      }
-      return false;
-    });
+    collectPending();
+    candidates = scanCandidates();
   } else {
     for (auto& tb : buffers_) {
       for (const VoxelRef& d : tb.dirty) {
@@ -491,24 +587,9 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
       const VoxelRef v = candidates[i];
       BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
       const uint64_t k = b->key[v.offset].load(std::memory_order_relaxed);
-      if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSite) continue;
+      if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey) continue;
       const Coord q = b->origin + brickLocal(v.offset);
-      // Cheap test first: does a propagating stencil neighbour hold a different site?
-      bool boundary = false;
-      for (const Link& d : links_) {
-        const Coord n{q.x - d.x, q.y - d.y, q.z - d.z};
-        if (uint32_t(n.x) >= uint32_t(dims_.x) || uint32_t(n.y) >= uint32_t(dims_.y) ||
-            uint32_t(n.z) >= uint32_t(dims_.z) || !stencil_.propagates(n))
-          continue;
-        BrickState* nb = table_[brickIndex(n.x, n.y, n.z)].load(std::memory_order_relaxed);
-        if (!nb) continue;
-        const uint64_t nk = nb->key[brickOffset(n.x & 7, n.y & 7, n.z & 7)].load(std::memory_order_relaxed);
-        if (nk == kUntouched || keySite(nk) == keySite(k) || keySite(nk) == kNoSite) continue;
-        if (region_ && regionOf(n) != regionOf(q)) continue;
-        boundary = true;
-        break;
-      }
-      if (!boundary) continue;
+      if (!first_round && !isBoundary(q, k)) continue;
       gatherBlock(q, block);
       uint64_t best = k;
       uint32_t last_site = keySite(k);
@@ -518,10 +599,10 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
         const uint32_t s = keySite(nk);
         if (s == last_site || s == keySite(best)) continue;
         last_site = s;
-        const uint64_t cand = packKey(metric_.key2(s, q.x, q.y, q.z), s);
+        const uint64_t cand = packKey(metric_.key2(s, q.x, q.y, q.z), kNoDirection, s);
         if (cand < best) best = cand;
       }
-      if (best < k) tb.corrections.push_back({v, best});
+      if (keySite(best) != keySite(k)) tb.corrections.push_back({v, best});
     }
   });
   std::vector<FrontEntry> front;
@@ -532,7 +613,8 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
       b->stamp[v.offset].store(uint16_t(step_), std::memory_order_relaxed);
       ++corrections_;
       if (!(b->flags[v.offset].fetch_or(kDirty, std::memory_order_relaxed) & kDirty)) tb.dirty.push_back(v);
-      if (stencil_.propagates(b->origin + brickLocal(v.offset))) front.push_back({v.brick, v.offset, keySite(key)});
+      if (stencil_.propagates(b->origin + brickLocal(v.offset)))
+        front.push_back({v.brick, v.offset, uint8_t(kNoDirection), keySite(key)});
     }
     tb.corrections.clear();
   }
@@ -581,13 +663,23 @@ void BandRun::gatherBlock(const Coord& q, uint64_t* block) const {
         uint64_t nk = kUntouched;
         if (valid[0][ix] && nb) {
           nk = nb->key[(local[0][ix] << 6) | yz].load(std::memory_order_relaxed);
-          if (keySite(nk) == kNoSite ||
+          if (keySite(nk) == kNoSiteKey ||
               (region_ && regionOf({q.x + ix - 2, q.y + iy - 2, q.z + iz - 2}) != region))
             nk = kUntouched;
         }
         block[j] = nk;
       }
     }
+}
+
+// Merges the bricks that got their first unemitted voxel into pending_bricks_, kept sorted by brick index.
+void BandRun::collectPending() {
+  for (auto& tb : buffers_) {
+    pending_bricks_.insert(pending_bricks_.end(), tb.pending.begin(), tb.pending.end());
+    tb.pending.clear();
+  }
+  std::sort(pending_bricks_.begin(), pending_bricks_.end());
+  pending_bricks_.erase(std::unique(pending_bricks_.begin(), pending_bricks_.end()), pending_bricks_.end());
 }
 
 // Voxels admitted beyond the previous threshold but not yet delivered start the new segment's lifespan clock.
@@ -607,10 +699,7 @@ void BandRun::rearmLifespans() {
 // Delivers every touched voxel within the threshold not delivered before. Returns whether this was the last
 // segment: the limit was reached, or nothing was deferred and no admitted voxel waits beyond the threshold.
 bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats) {
-  for (auto& tb : buffers_) {
-    pending_bricks_.insert(pending_bricks_.end(), tb.pending.begin(), tb.pending.end());
-    tb.pending.clear();
-  }
+  collectPending();
   const double h = grid_.voxelSize();
   std::vector<Brick> out(pending_bricks_.size());
   std::vector<uint8_t> keep(pending_bricks_.size(), 0);
@@ -634,7 +723,7 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
                           }
                           const Coord c = b->origin + brickLocal(off);
                           const uint32_t s = keySite(k);
-                          sites[off] = s;
+                          sites[off] = s == kNoSiteKey ? kNoSite : s;
                           brick.values[off] = float(std::sqrt(metric_.dist2(s, c.x, c.y, c.z)) * h);
                           brick.mask.set(off);
                           b->flags[off].store(f | kEmitted, std::memory_order_relaxed);
@@ -673,7 +762,7 @@ EngineResult BandRun::run() {
   using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
   EngineResult result;
-  track_marks_ = opt_.mode == PropagationMode::kExact;
+  correcting_ = opt_.mode == PropagationMode::kExact;
 
   const bool segmented = segment_vox_ > 0;
   auto upperOf = [&](int i) {
@@ -693,7 +782,9 @@ EngineResult BandRun::run() {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i != r.end(); ++i) {
         BrickState* b = table_[front[i].brick].load(std::memory_order_relaxed);
-        front[i].site = keySite(b->key[front[i].offset].load(std::memory_order_relaxed));
+        const uint64_t k = b->key[front[i].offset].load(std::memory_order_relaxed);
+        front[i].site = keySite(k);
+        front[i].dir = uint8_t(keyDir(k));
       }
     });
     return front;
@@ -737,7 +828,7 @@ EngineResult BandRun::run() {
         break;
       }
       if (front.empty()) {
-        if (!track_marks_) break;
+        if (!correcting_) break;
         front = correct(!collect_dirty_);
         collect_dirty_ = true;
         if (front.empty()) break;
