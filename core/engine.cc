@@ -90,8 +90,7 @@ inline uint32_t toKeySite(uint32_t site) { return site == kNoSite ? kNoSiteKey :
 
 constexpr uint32_t kOutsideGrid = ~uint32_t(0);
 constexpr uint16_t kNeverExpires = 0xFFFF;
-constexpr uint16_t kNoStamp = 0xFFFF;
-constexpr int kMaxSteps = 65000;  // expiry and stamps are 16-bit step numbers
+constexpr int kMaxSteps = 65000;  // expiry holds 16-bit step numbers
 // Offers are admitted this many voxels beyond the segment threshold (and the limit), while only voxels within the
 // threshold are frozen and delivered: a closest site whose path briefly runs outside the threshold still arrives.
 constexpr double kAdmitSlackVoxels = 2.0;
@@ -99,21 +98,25 @@ constexpr uint8_t kEmitted = 2;
 constexpr uint8_t kDirty = 4;   // changed since the last correction round (listed in ThreadBuffers::dirty)
 constexpr uint8_t kQueued = 8;  // already a candidate of the current correction round
 
+// 10 bytes a voxel (12 with a lifespan): memory follows the touched bricks.
 struct BrickState {
-  explicit BrickState(Coord o) : origin(o) {
+  BrickState(Coord o, bool with_lifespan) : origin(o) {
     for (int i = 0; i < kBrickVoxels; ++i) {
       key[i].store(kUntouched, std::memory_order_relaxed);
-      expiry[i].store(kNeverExpires, std::memory_order_relaxed);
-      stamp[i].store(kNoStamp, std::memory_order_relaxed);
+      listed[i].store(0, std::memory_order_relaxed);
       flags[i].store(0, std::memory_order_relaxed);
+    }
+    if (with_lifespan) {
+      expiry = std::make_unique<std::atomic<uint16_t>[]>(kBrickVoxels);
+      for (int i = 0; i < kBrickVoxels; ++i) expiry[i].store(kNeverExpires, std::memory_order_relaxed);
     }
   }
   Coord origin;
   std::atomic<bool> pending{false};  // listed for emission (holds touched, not yet emitted voxels)
   std::atomic<uint64_t> key[kBrickVoxels];
-  std::atomic<uint16_t> expiry[kBrickVoxels];  // last step in which the voxel accepts offers (paper mode)
-  std::atomic<uint16_t> stamp[kBrickVoxels];   // last step in which the voxel changed
+  std::atomic<uint8_t> listed[kBrickVoxels];  // already in the next front
   std::atomic<uint8_t> flags[kBrickVoxels];
+  std::unique_ptr<std::atomic<uint16_t>[]> expiry;  // paper mode: last step in which a voxel accepts offers
 };
 
 struct VoxelRef {
@@ -222,7 +225,7 @@ class BandRun {
   BrickState* getOrCreate(uint32_t bi, ThreadBuffers& tb) {
     BrickState* b = table_[bi].load(std::memory_order_acquire);
     if (b) return b;
-    auto* fresh = new BrickState(brickOrigin(bi));
+    auto* fresh = new BrickState(brickOrigin(bi), use_lifespan_);
     if (table_[bi].compare_exchange_strong(b, fresh, std::memory_order_acq_rel)) {
       tb.allocated.push_back(fresh);
       return fresh;
@@ -256,8 +259,8 @@ class BandRun {
           tb.dirty.push_back({bi, uint16_t(off)});
         // Listed once per step. Two threads lowering the same voxel at once may both list it: the duplicate
         // offers the same snapshot site twice, which changes nothing.
-        if (propagates && b->stamp[off].load(std::memory_order_relaxed) != uint16_t(step_)) {
-          b->stamp[off].store(uint16_t(step_), std::memory_order_relaxed);
+        if (propagates && !b->listed[off].load(std::memory_order_relaxed)) {
+          b->listed[off].store(1, std::memory_order_relaxed);
           tb.next.push_back({bi, uint16_t(off), 0, 0});
         }
         return true;
@@ -526,11 +529,39 @@ std::vector<VoxelRef> BandRun::scanCandidates() {
             }
         if (all_same) continue;
       }
+      // The 27 bricks around this one (null outside the grid or untouched), for the per-voxel test.
+      BrickState* nbr[27];
+      const Coord bc{b->origin.x >> kBrickLog2, b->origin.y >> kBrickLog2, b->origin.z >> kBrickLog2};
+      for (int j = 0; j < 27; ++j) {
+        const int x = bc.x + j % 3 - 1, y = bc.y + (j / 3) % 3 - 1, z = bc.z + j / 9 - 1;
+        nbr[j] = (x < 0 || y < 0 || z < 0 || x >= bdims_.x || y >= bdims_.y || z >= bdims_.z)
+                     ? nullptr
+                     : table_[(size_t(z) * bdims_.y + y) * bdims_.x + x].load(std::memory_order_relaxed);
+      }
+      const bool edge = b->origin.x + kBrickSize > dims_.x || b->origin.y + kBrickSize > dims_.y ||
+                        b->origin.z + kBrickSize > dims_.z;
       for (int off = 0; off < kBrickVoxels; ++off) {
         const uint64_t k = b->key[off].load(std::memory_order_relaxed);
         if (k == kUntouched || keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey) continue;
         if (b->flags[off].load(std::memory_order_relaxed) & kEmitted) continue;
-        if (isBoundary(b->origin + brickLocal(off), k)) tb.candidates.push_back({bi, uint16_t(off)});
+        const Coord l = brickLocal(off);
+        const Coord q = b->origin + l;
+        const uint32_t site = keySite(k);
+        const uint8_t region = regionOf(q);
+        bool boundary = false;
+        // Links are symmetric: the neighbour q + d offers to q along -d.
+        for (const Link& d : linksFor(l, kNoDirection)) {
+          BrickState* nb = nbr[d.brick];
+          if (!nb) continue;
+          const Coord n{q.x + d.x, q.y + d.y, q.z + d.z};
+          if (edge && !grid_.contains(n)) continue;
+          const uint64_t nk = nb->key[off + d.offset].load(std::memory_order_relaxed);
+          if (nk == kUntouched || keySite(nk) == site || keySite(nk) == kNoSiteKey) continue;
+          if (!stencil_.propagates(n) || (region_ && regionOf(n) != region)) continue;
+          boundary = true;
+          break;
+        }
+        if (boundary) tb.candidates.push_back({bi, uint16_t(off)});
       }
     }
   });
@@ -610,7 +641,6 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
     for (const auto& [v, key] : tb.corrections) {
       BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
       b->key[v.offset].store(key, std::memory_order_relaxed);
-      b->stamp[v.offset].store(uint16_t(step_), std::memory_order_relaxed);
       ++corrections_;
       if (!(b->flags[v.offset].fetch_or(kDirty, std::memory_order_relaxed) & kDirty)) tb.dirty.push_back(v);
       if (stencil_.propagates(b->origin + brickLocal(v.offset)))
@@ -783,6 +813,7 @@ EngineResult BandRun::run() {
       for (size_t i = r.begin(); i != r.end(); ++i) {
         BrickState* b = table_[front[i].brick].load(std::memory_order_relaxed);
         const uint64_t k = b->key[front[i].offset].load(std::memory_order_relaxed);
+        b->listed[front[i].offset].store(0, std::memory_order_relaxed);
         front[i].site = keySite(k);
         front[i].dir = uint8_t(keyDir(k));
       }
