@@ -1,0 +1,105 @@
+#include "core/io/vdb_writer.h"
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include <fmt/format.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/SignedFloodFill.h>
+
+#include "core/io/vdb_reader.h"
+
+namespace distband {
+
+struct VdbFieldBuilder::Impl {
+  openvdb::FloatGrid::Ptr grid;
+  openvdb::FloatGrid::Accessor accessor;
+  bool finished = false;
+  explicit Impl(openvdb::FloatGrid::Ptr g) : grid(std::move(g)), accessor(grid->getAccessor()) {}
+};
+
+VdbFieldBuilder::VdbFieldBuilder(const Grid& grid, float background) {
+  openvdb::initialize();  // idempotent; registers the grid types the writer needs
+  // No limit (or a nonsensical one): no distance inside the grid exceeds its diagonal, so that is a safe background.
+  if (!(std::isfinite(background) && background > 0)) {
+    const Coord d = grid.dims();
+    background = float(grid.voxelSize() * std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z));
+  }
+  auto g = openvdb::FloatGrid::create(background);
+  auto xform = openvdb::math::Transform::createLinearTransform(grid.voxelSize());
+  xform->postTranslate(openvdb::Vec3d(grid.origin().x, grid.origin().y, grid.origin().z));
+  g->setTransform(xform);
+  g->setGridClass(openvdb::GRID_LEVEL_SET);
+  g->setName("distance");
+  g->insertMeta("distband_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(grid.dims().x, grid.dims().y, grid.dims().z)));
+  impl_ = std::make_unique<Impl>(std::move(g));
+}
+
+VdbFieldBuilder::~VdbFieldBuilder() = default;
+
+void VdbFieldBuilder::add(const Brick& brick) {
+  if (brick.mask.empty()) return;
+  auto* leaf = impl_->accessor.touchLeaf(openvdb::Coord(brick.origin.x, brick.origin.y, brick.origin.z));
+  for (int w = 0; w < kBrickVoxels / 64; ++w) {
+    uint64_t bits = brick.mask.words[w];
+    while (bits) {
+      const int i = w * 64 + std::countr_zero(bits);
+      bits &= bits - 1;
+      leaf->setValueOn(static_cast<openvdb::Index>(i), brick.values[i]);
+    }
+  }
+}
+
+void VdbFieldBuilder::add(const SegmentBricks& segment) {
+  for (const Brick& b : segment.bricks) add(b);
+}
+
+void VdbFieldBuilder::finish() {
+  if (impl_->finished) return;
+  impl_->finished = true;
+  openvdb::tools::signedFloodFill(impl_->grid->tree());
+}
+
+int64_t VdbFieldBuilder::activeVoxels() const { return static_cast<int64_t>(impl_->grid->activeVoxelCount()); }
+
+std::shared_ptr<void> VdbFieldBuilder::gridHandle() { return impl_->grid; }
+
+std::string VdbFieldBuilder::write(const std::string& path) {
+  finish();
+  const std::string tmp = path + ".tmp";
+  try {
+    openvdb::io::File file(tmp);
+    file.write({impl_->grid});
+    file.close();
+  } catch (const std::exception& e) {
+    std::error_code ec;
+    std::filesystem::remove(tmp, ec);
+    return fmt::format("{}: cannot write the VDB file: {}", path, e.what());
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    return fmt::format("{}: cannot move the finished file into place: {}", path, ec.message());
+  }
+  return {};
+}
+
+std::string readVdb(const std::string& path, openvdb::FloatGrid::Ptr* out, const std::string& grid_name) {
+  openvdb::initialize();
+  try {
+    openvdb::io::File file(path);
+    file.open();
+    openvdb::GridBase::Ptr base = file.readGrid(grid_name);
+    file.close();
+    auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
+    if (!grid) return fmt::format("{}: grid '{}' is not a FloatGrid", path, grid_name);
+    *out = grid;
+  } catch (const std::exception& e) {
+    return fmt::format("{}: cannot read grid '{}': {}", path, grid_name, e.what());
+  }
+  return {};
+}
+
+}  // namespace distband

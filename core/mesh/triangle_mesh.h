@@ -1,0 +1,46 @@
+// TriangleMesh: an indexed triangle soup loaded from a file (OBJ, OFF, PLY, STL ascii/binary) and validated.
+// Contract: after loadMesh() or validateMesh() succeed, the mesh is non-empty, every coordinate is finite, every
+// index is < vertices.size(), no triangle has zero area, and vertices that share an exact position are welded
+// (so edges shared by triangles from different file groups are recognised as shared). MeshReport says what was
+// found, including what was dropped. Errors are returned as strings that name the file and the problem; malformed
+// input never asserts or crashes. Plain value types; not synchronised.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/types.h"
+
+namespace distband {
+
+struct TriangleMesh {
+  std::vector<Vec3d> vertices;                  ///< world coordinates
+  std::vector<std::array<uint32_t, 3>> triangles;  ///< counter-clockwise seen from outside (outward normals)
+};
+
+struct MeshReport {
+  int64_t vertices = 0;            ///< after welding identical positions
+  int64_t triangles = 0;           ///< kept (non-degenerate) triangles
+  int64_t degenerate = 0;          ///< zero-area triangles (repeated index or collinear corners), skipped
+  int64_t non_triangles = 0;       ///< point/line primitives in the file, skipped
+  int64_t boundary_edges = 0;      ///< edges used by exactly one kept triangle (0 for a closed mesh)
+  int64_t non_manifold_edges = 0;  ///< edges used by more than two kept triangles
+  Vec3d bbox_min, bbox_max;        ///< world bounding box of the kept triangles' vertices
+
+  bool closed() const { return boundary_edges == 0 && non_manifold_edges == 0; }
+  std::string summary() const;     ///< one line for logs and the CLI
+};
+
+/// Loads `path` through assimp (joining identical vertices; polygons are fanned into triangles; nothing that moves
+/// geometry) and validates it with validateMesh(). Returns "" on success; otherwise "<path>: <problem>" and
+/// leaves `mesh` untouched. `report` may be null.
+std::string loadMesh(const std::string& path, TriangleMesh* mesh, MeshReport* report);
+
+/// Validates an in-memory mesh in place: rejects an empty mesh, non-finite coordinates and out-of-range
+/// indices; welds identical positions, drops degenerate triangles and unreferenced vertices, and fills `report`
+/// (may be null). Returns "" on success, otherwise the problem (the mesh is then unspecified).
+std::string validateMesh(TriangleMesh* mesh, MeshReport* report);
+
+}  // namespace distband

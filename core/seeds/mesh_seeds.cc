@@ -1,0 +1,404 @@
+#include "core/seeds/mesh_seeds.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+
+#include <embree3/rtcore.h>
+#include <fmt/format.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include "core/geometry.h"
+#include "core/mesh/winding_number.h"
+
+namespace distband {
+
+std::string_view meshSiteModeName(MeshSiteMode mode) {
+  return mode == MeshSiteMode::kPaper ? "paper" : "exact-feature";
+}
+bool parseMeshSiteMode(std::string_view name, MeshSiteMode* mode) {
+  if (name == "exact-feature") return *mode = MeshSiteMode::kExactFeature, true;
+  if (name == "paper") return *mode = MeshSiteMode::kPaper, true;
+  return false;
+}
+std::string_view signMethodName(SignMethod method) {
+  switch (method) {
+    case SignMethod::kPseudonormal: return "pseudonormal";
+    case SignMethod::kWinding: return "winding";
+    case SignMethod::kParity: return "parity";
+    case SignMethod::kUnsigned: return "unsigned";
+  }
+  return "?";
+}
+bool parseSignMethod(std::string_view name, SignMethod* method) {
+  for (SignMethod m : {SignMethod::kPseudonormal, SignMethod::kWinding, SignMethod::kParity, SignMethod::kUnsigned})
+    if (name == signMethodName(m)) return *method = m, true;
+  return false;
+}
+
+namespace {
+
+// The closest feature of a triangle: its face, one of its edges (e0 = ab, e1 = bc, e2 = ca) or a corner.
+enum class Feature : uint8_t { kFace, kEdge0, kEdge1, kEdge2, kVertex0, kVertex1, kVertex2 };
+
+// Ericson's region tests (RTCD §5.1.5), reporting which region the closest point lies in. Non-degenerate input.
+Vec3d closestWithFeature(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c, Feature* f) {
+  const Vec3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return *f = Feature::kVertex0, a;
+  const Vec3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return *f = Feature::kVertex1, b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return *f = Feature::kEdge0, a + ab * (d1 / (d1 - d3));
+  const Vec3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return *f = Feature::kVertex2, c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return *f = Feature::kEdge2, a + ac * (d2 / (d2 - d6));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+    return *f = Feature::kEdge1, b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  const double denom = 1.0 / (va + vb + vc);
+  *f = Feature::kFace;
+  return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+Vec3d normalized(const Vec3d& v) {
+  const double l = v.length();
+  return l > 0 ? v * (1.0 / l) : Vec3d{};
+}
+
+// Embree scene for ray parity; owns the device and scene for as long as a sign function refers to it.
+class ParityScene {
+ public:
+  ParityScene(const std::vector<std::array<Vec3d, 3>>& tris) {
+    device_ = rtcNewDevice(nullptr);
+    if (!device_) return;
+    scene_ = rtcNewScene(device_);
+    rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* v = static_cast<float*>(
+        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), tris.size() * 3));
+    auto* idx = static_cast<unsigned*>(
+        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), tris.size()));
+    for (size_t t = 0; t < tris.size(); ++t)
+      for (int k = 0; k < 3; ++k) {
+        v[9 * t + 3 * k + 0] = float(tris[t][k].x);
+        v[9 * t + 3 * k + 1] = float(tris[t][k].y);
+        v[9 * t + 3 * k + 2] = float(tris[t][k].z);
+        idx[3 * t + k] = unsigned(3 * t + k);
+      }
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(scene_, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(scene_);
+  }
+  ~ParityScene() {
+    if (scene_) rtcReleaseScene(scene_);
+    if (device_) rtcReleaseDevice(device_);
+  }
+  ParityScene(const ParityScene&) = delete;
+  ParityScene& operator=(const ParityScene&) = delete;
+  bool ok() const { return scene_ != nullptr; }
+
+  /// Majority vote of three rays in fixed, non-axis-aligned directions: odd crossing count = inside.
+  bool inside(const Vec3d& p) const {
+    static const float kDirs[3][3] = {{0.8273f, 0.4712f, 0.3057f}, {-0.3391f, 0.8617f, 0.3774f},
+                                      {0.2719f, -0.4483f, 0.8515f}};
+    int votes = 0;
+    for (const auto& d : kDirs) votes += crossings(p, d) & 1;
+    return votes >= 2;
+  }
+
+ private:
+  int crossings(const Vec3d& p, const float* dir) const {
+    int count = 0;
+    float tnear = 0;
+    for (int guard = 0; guard < 1 << 16; ++guard) {
+      RTCIntersectContext ctx;
+      rtcInitIntersectContext(&ctx);
+      RTCRayHit rh{};
+      rh.ray.org_x = float(p.x), rh.ray.org_y = float(p.y), rh.ray.org_z = float(p.z);
+      rh.ray.dir_x = dir[0], rh.ray.dir_y = dir[1], rh.ray.dir_z = dir[2];
+      rh.ray.tnear = tnear;
+      rh.ray.tfar = std::numeric_limits<float>::infinity();
+      rh.ray.mask = ~0u;
+      rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      rtcIntersect1(scene_, &ctx, &rh);
+      if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;
+      ++count;
+      // Step past this hit; hits at the same distance (a shared edge or corner) count once.
+      tnear = rh.ray.tfar + 1e-4f * std::max(1.0f, rh.ray.tfar);
+    }
+    return count;
+  }
+  RTCDevice device_ = nullptr;
+  RTCScene scene_ = nullptr;
+};
+
+// Everything the sign function needs, immutable once built, shared by every copy of Seeds::sign.
+struct MeshSigner {
+  double voxel_size = 1;
+  SignMethod method = SignMethod::kPseudonormal;
+  std::vector<std::array<Vec3d, 3>> tris;          // index space
+  std::vector<std::array<uint32_t, 3>> corners;    // mesh vertex ids
+  std::vector<Vec3d> face_n, edge_n, vertex_n;     // pseudonormals (edge_n: 3 per triangle)
+  std::vector<uint32_t> site_triangle;             // paper mode: site -> triangle (empty: site is the triangle)
+  std::unique_ptr<WindingNumber> winding;
+  std::unique_ptr<ParityScene> parity;
+
+  uint32_t triangleOf(uint32_t site) const { return site_triangle.empty() ? site : site_triangle[site]; }
+
+  bool insidePseudonormal(const Vec3d& p, uint32_t t) const {
+    Feature f;
+    const auto& tri = tris[t];
+    const Vec3d cp = closestWithFeature(p, tri[0], tri[1], tri[2], &f);
+    Vec3d n;
+    switch (f) {
+      case Feature::kFace: n = face_n[t]; break;
+      case Feature::kEdge0: n = edge_n[3 * t + 0]; break;
+      case Feature::kEdge1: n = edge_n[3 * t + 1]; break;
+      case Feature::kEdge2: n = edge_n[3 * t + 2]; break;
+      case Feature::kVertex0: n = vertex_n[corners[t][0]]; break;
+      case Feature::kVertex1: n = vertex_n[corners[t][1]]; break;
+      case Feature::kVertex2: n = vertex_n[corners[t][2]]; break;
+    }
+    return n.dot(p - cp) < 0;
+  }
+
+  void sign(Brick& brick, const uint32_t* sites) const {
+    struct Ball {
+      Vec3d c;
+      double r2;
+      bool inside;
+    };
+    std::vector<Ball> balls;
+    for (int i = 0; i < kBrickVoxels; ++i) {
+      if (!brick.mask.test(i)) continue;
+      const Coord c = brick.origin + brickLocal(i);
+      const Vec3d p{double(c.x), double(c.y), double(c.z)};
+      bool inside = false;
+      if (method == SignMethod::kPseudonormal) {
+        if (sites[i] == kNoSite) continue;
+        inside = insidePseudonormal(p, triangleOf(sites[i]));
+      } else {
+        bool found = false;
+        for (auto it = balls.rbegin(); it != balls.rend(); ++it)
+          if ((p - it->c).lengthSqr() < it->r2) {
+            inside = it->inside, found = true;
+            break;
+          }
+        if (!found) {
+          inside = method == SignMethod::kWinding ? winding->query(p) > 0.5 : parity->inside(p);
+          const double r = std::abs(brick.values[i]) / voxel_size - 1.0;
+          if (r > 0) balls.push_back({p, r * r, inside});
+        }
+      }
+      if (inside) brick.values[i] = -std::abs(brick.values[i]);
+    }
+  }
+};
+
+void buildPseudonormals(const TriangleMesh& mesh, MeshSigner* s) {
+  const size_t nt = s->tris.size();
+  s->face_n.resize(nt);
+  s->edge_n.assign(3 * nt, Vec3d{});
+  s->vertex_n.assign(mesh.vertices.size(), Vec3d{});
+  for (size_t t = 0; t < nt; ++t) {
+    const auto& tri = s->tris[t];
+    s->face_n[t] = normalized((tri[1] - tri[0]).cross(tri[2] - tri[0]));
+    for (int k = 0; k < 3; ++k) {
+      const Vec3d e1 = normalized(tri[(k + 1) % 3] - tri[k]), e2 = normalized(tri[(k + 2) % 3] - tri[k]);
+      const double angle = std::acos(std::clamp(e1.dot(e2), -1.0, 1.0));
+      Vec3d& vn = s->vertex_n[s->corners[t][k]];
+      vn = vn + s->face_n[t] * angle;
+    }
+  }
+  // Edge pseudonormal: the sum of the normals of the triangles sharing the edge.
+  struct EdgeUse {
+    uint64_t key;
+    uint32_t slot;  // 3 * triangle + edge
+  };
+  std::vector<EdgeUse> uses;
+  uses.reserve(3 * nt);
+  for (size_t t = 0; t < nt; ++t)
+    for (int e = 0; e < 3; ++e) {
+      const uint64_t a = s->corners[t][e], b = s->corners[t][(e + 1) % 3];
+      uses.push_back({std::min(a, b) << 32 | std::max(a, b), uint32_t(3 * t + e)});
+    }
+  std::sort(uses.begin(), uses.end(), [](const EdgeUse& x, const EdgeUse& y) { return x.key < y.key; });
+  for (size_t i = 0; i < uses.size();) {
+    size_t j = i;
+    Vec3d sum{};
+    while (j < uses.size() && uses[j].key == uses[i].key) sum = sum + s->face_n[uses[j++].slot / 3];
+    for (size_t k = i; k < j; ++k) s->edge_n[uses[k].slot] = sum;
+    i = j;
+  }
+}
+
+struct Candidate {
+  int64_t brick;
+  uint32_t tri;
+};
+
+}  // namespace
+
+std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
+                          MeshSeedStats* stats) {
+  const auto start = std::chrono::steady_clock::now();
+  if (std::string e = grid.validate(); !e.empty()) return "grid: " + e;
+  if (mesh.triangles.empty()) return "the mesh has no triangles";
+  if (!(options.band_radius_voxels > 0 && options.band_radius_voxels <= 8))
+    return fmt::format("band radius must be in (0, 8] voxels (got {})", options.band_radius_voxels);
+  if (!(options.limit_voxels > 0)) return fmt::format("limit must be > 0 (got {})", options.limit_voxels);
+  for (const auto& t : mesh.triangles)
+    for (uint32_t i : t)
+      if (i >= mesh.vertices.size()) return "a triangle refers to a vertex that does not exist";
+  const size_t nt = mesh.triangles.size();
+  if (nt >= kNoSite) return "too many triangles";
+
+  std::vector<std::array<Vec3d, 3>> tris(nt);
+  std::vector<Vec3d> normals(nt);
+  for (size_t t = 0; t < nt; ++t) {
+    for (int k = 0; k < 3; ++k) tris[t][k] = grid.indexOf(mesh.vertices[mesh.triangles[t][k]]);
+    normals[t] = normalized((tris[t][1] - tris[t][0]).cross(tris[t][2] - tris[t][0]));
+  }
+  const double radius = std::min(options.band_radius_voxels, options.limit_voxels);
+  const double r2 = radius * radius;
+  const Coord dims = grid.dims(), bd = grid.brickDims();
+
+  // Voxel box of each triangle's radius-neighbourhood, clipped to the grid (lo > hi: nothing to scan).
+  auto voxelBox = [&](size_t t, Coord* lo, Coord* hi) {
+    const auto& tri = tris[t];
+    auto range = [&](double a, double b, double c, int n, int32_t* l, int32_t* h) {
+      const double mn = std::min({a, b, c}) - radius, mx = std::max({a, b, c}) + radius;
+      *l = static_cast<int32_t>(std::max(0.0, std::ceil(mn)));
+      *h = static_cast<int32_t>(std::min(double(n - 1), std::floor(mx)));
+    };
+    range(tri[0].x, tri[1].x, tri[2].x, dims.x, &lo->x, &hi->x);
+    range(tri[0].y, tri[1].y, tri[2].y, dims.y, &lo->y, &hi->y);
+    range(tri[0].z, tri[1].z, tri[2].z, dims.z, &lo->z, &hi->z);
+    return lo->x <= hi->x && lo->y <= hi->y && lo->z <= hi->z;
+  };
+  // 1. (brick, triangle) candidates: every brick a triangle's neighbourhood overlaps.
+  std::vector<uint64_t> offsets(nt + 1, 0);
+  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
+    Coord lo, hi;
+    if (!voxelBox(t, &lo, &hi)) return;
+    offsets[t + 1] = uint64_t((hi.x >> 3) - (lo.x >> 3) + 1) * ((hi.y >> 3) - (lo.y >> 3) + 1) *
+                     ((hi.z >> 3) - (lo.z >> 3) + 1);
+  });
+  for (size_t t = 0; t < nt; ++t) offsets[t + 1] += offsets[t];
+  std::vector<Candidate> cand(offsets[nt]);
+  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
+    Coord lo, hi;
+    if (!voxelBox(t, &lo, &hi)) return;
+    uint64_t o = offsets[t];
+    for (int z = lo.z >> 3; z <= hi.z >> 3; ++z)
+      for (int y = lo.y >> 3; y <= hi.y >> 3; ++y)
+        for (int x = lo.x >> 3; x <= hi.x >> 3; ++x)
+          cand[o++] = {(int64_t(z) * bd.y + y) * bd.x + x, uint32_t(t)};
+  });
+  tbb::parallel_sort(cand.begin(), cand.end(), [](const Candidate& a, const Candidate& b) {
+    return a.brick < b.brick || (a.brick == b.brick && a.tri < b.tri);
+  });
+  std::vector<size_t> starts;
+  for (size_t i = 0; i < cand.size(); ++i)
+    if (i == 0 || cand[i].brick != cand[i - 1].brick) starts.push_back(i);
+  starts.push_back(cand.size());
+  const size_t nbricks = starts.size() - 1;
+
+  // 2. Per brick: each voxel's closest triangle among its candidates, kept when within the radius.
+  std::vector<std::vector<BandVoxel>> per_brick(nbricks);
+  tbb::parallel_for(size_t(0), nbricks, [&](size_t b) {
+    const int64_t key = cand[starts[b]].brick;
+    const Coord borg{int32_t(key % bd.x) * kBrickSize, int32_t((key / bd.x) % bd.y) * kBrickSize,
+                     int32_t(key / (int64_t(bd.x) * bd.y)) * kBrickSize};
+    std::array<double, kBrickVoxels> best;
+    std::array<uint32_t, kBrickVoxels> best_t;
+    best.fill(r2);
+    best_t.fill(kNoSite);
+    for (size_t i = starts[b]; i < starts[b + 1]; ++i) {
+      const uint32_t t = cand[i].tri;
+      Coord lo, hi;
+      voxelBox(t, &lo, &hi);
+      lo = {std::max(lo.x, borg.x), std::max(lo.y, borg.y), std::max(lo.z, borg.z)};
+      hi = {std::min(hi.x, borg.x + 7), std::min(hi.y, borg.y + 7), std::min(hi.z, borg.z + 7)};
+      const auto& tri = tris[t];
+      const Vec3d n = normals[t];
+      for (int x = lo.x; x <= hi.x; ++x)
+        for (int y = lo.y; y <= hi.y; ++y)
+          for (int z = lo.z; z <= hi.z; ++z) {
+            const Vec3d p{double(x), double(y), double(z)};
+            const double plane = n.dot(p - tri[0]);
+            const int o = brickOffset(x & 7, y & 7, z & 7);
+            if (plane * plane > best[o]) continue;
+            const double d2 = pointTriangleDistanceSqr(p, tri[0], tri[1], tri[2]);
+            if (d2 < best[o] || (d2 == best[o] && t < best_t[o])) best[o] = d2, best_t[o] = t;
+          }
+    }
+    auto& v = per_brick[b];
+    for (int o = 0; o < kBrickVoxels; ++o)
+      if (best_t[o] != kNoSite) v.push_back({borg + brickLocal(o), best_t[o]});
+  });
+  std::vector<Candidate>().swap(cand);
+  std::vector<size_t> band_at(nbricks + 1, 0);
+  for (size_t b = 0; b < nbricks; ++b) band_at[b + 1] = band_at[b] + per_brick[b].size();
+
+  Seeds seeds;
+  seeds.band.resize(band_at[nbricks]);
+  tbb::parallel_for(size_t(0), nbricks, [&](size_t b) {
+    std::copy(per_brick[b].begin(), per_brick[b].end(), seeds.band.begin() + band_at[b]);
+    std::vector<BandVoxel>().swap(per_brick[b]);
+  });
+  std::vector<std::vector<BandVoxel>>().swap(per_brick);
+
+  auto signer = std::make_shared<MeshSigner>();
+  signer->voxel_size = grid.voxelSize();
+  signer->method = options.sign;
+  if (options.mode == MeshSiteMode::kPaper) {
+    // 3p. Paper mode: each band voxel's closest point becomes a site of its own.
+    seeds.kind = SiteKind::kPoint;
+    seeds.points.resize(seeds.band.size());
+    if (options.sign == SignMethod::kPseudonormal) signer->site_triangle.resize(seeds.band.size());
+    tbb::parallel_for(size_t(0), seeds.band.size(), [&](size_t i) {
+      BandVoxel& bv = seeds.band[i];
+      const auto& tri = tris[bv.site];
+      const Vec3d p{double(bv.voxel.x), double(bv.voxel.y), double(bv.voxel.z)};
+      seeds.points[i] = closestPointOnTriangle(p, tri[0], tri[1], tri[2]);
+      if (!signer->site_triangle.empty()) signer->site_triangle[i] = bv.site;
+      bv.site = static_cast<uint32_t>(i);
+    });
+  } else {
+    seeds.kind = SiteKind::kTriangle;
+    seeds.triangles = tris;
+  }
+  switch (options.sign) {
+    case SignMethod::kUnsigned: break;
+    case SignMethod::kPseudonormal:
+      signer->tris = std::move(tris);
+      signer->corners = mesh.triangles;
+      buildPseudonormals(mesh, signer.get());
+      break;
+    case SignMethod::kWinding: signer->winding = std::make_unique<WindingNumber>(std::move(tris)); break;
+    case SignMethod::kParity:
+      signer->parity = std::make_unique<ParityScene>(tris);
+      if (!signer->parity->ok()) return "cannot create the Embree device for parity signs";
+      break;
+  }
+  if (options.sign != SignMethod::kUnsigned)
+    seeds.sign = [signer](Brick& brick, const uint32_t* sites) { signer->sign(brick, sites); };
+
+  if (stats) {
+    stats->band_voxels = static_cast<int64_t>(seeds.band.size());
+    stats->bricks_scanned = static_cast<int64_t>(nbricks);
+    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  *out = std::move(seeds);
+  return {};
+}
+
+}  // namespace distband

@@ -1,0 +1,57 @@
+// Mesh seeds: the initial band and site table for the distance to a triangle mesh, and its sign.
+// Contract: makeMeshSeeds() scans, for every triangle, the voxels within `band_radius_voxels` of it (an exact
+// point–triangle scan, brick by brick, in parallel on the caller's TBB arena); each band voxel gets its exact
+// closest triangle (ties: the lowest triangle index, so the band is deterministic). The band thus holds every
+// voxel whose cell the surface crosses (distance <= sqrt(3)/2) and, with the default radius 1.5, their face
+// neighbours and most edge neighbours. Band voxels farther than `limit_voxels` are dropped.
+//   * kExactFeature (default): sites are the mesh's triangles in index space (Seeds::kTriangle); the engine
+//     propagates triangle ids and evaluates the exact point–triangle distance where they arrive.
+//   * kPaper: sites are the band voxels' closest points (Seeds::kPoint), propagated as CP + PQ (paper eq. 2);
+//     each site remembers its triangle for the sign.
+// Sign (negative inside): Seeds::sign is set unless the method is kUnsigned. It reads only immutable shared
+// state (captured by shared_ptr, including the Embree scene for parity), so it is thread-safe.
+//   * kPseudonormal: angle-weighted pseudonormal of the closest feature (face, edge or vertex) of the voxel's
+//     site triangle (Bærentzen & Aanæs 2005). Exact for closed, consistently oriented meshes.
+//   * kWinding: generalized winding number > 0.5 (robust for open meshes), hierarchical evaluation.
+//   * kParity: Embree rays in 3 fixed directions, inside when the majority cross the surface an odd number of times.
+//   For winding and parity a voxel at unsigned distance d decides the sign of the voxels within d - 1 of it in
+//   the same brick (no surface lies between them), which saves most evaluations away from the surface.
+// Errors (empty mesh, invalid grid or options) come back as a message; `out` is then untouched.
+#pragma once
+
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <string_view>
+
+#include "core/grid.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/seeds.h"
+
+namespace distband {
+
+enum class MeshSiteMode { kExactFeature, kPaper };
+enum class SignMethod { kPseudonormal, kWinding, kParity, kUnsigned };
+
+std::string_view meshSiteModeName(MeshSiteMode mode);
+bool parseMeshSiteMode(std::string_view name, MeshSiteMode* mode);  ///< "exact-feature", "paper"
+std::string_view signMethodName(SignMethod method);
+bool parseSignMethod(std::string_view name, SignMethod* method);  ///< "pseudonormal", "winding", "parity", "unsigned"
+
+struct MeshSeedOptions {
+  MeshSiteMode mode = MeshSiteMode::kExactFeature;
+  SignMethod sign = SignMethod::kPseudonormal;
+  double band_radius_voxels = 1.5;  ///< initial band: voxels within this distance of a triangle, in (0, 8]
+  double limit_voxels = std::numeric_limits<double>::infinity();  ///< band voxels beyond are dropped
+};
+
+struct MeshSeedStats {
+  int64_t band_voxels = 0;
+  int64_t bricks_scanned = 0;
+  double seconds = 0;
+};
+
+std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
+                          MeshSeedStats* stats = nullptr);
+
+}  // namespace distband
