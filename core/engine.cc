@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 
 #include <fmt/format.h>
@@ -151,7 +152,7 @@ struct SiteMetric {
     const Vec3d p{x, y, z};
     if (seeds.kind == SiteKind::kPoint) return (p - seeds.points[site]).lengthSqr();
     const auto& t = seeds.triangles[site];
-    return pointTriangleDistanceSqr(p, t[0], t[1], t[2]);
+    return TriangleDistance(t[0], t[1], t[2]).dist2(p);
   }
   // ... and rounded to float for the key.
   float key2(uint32_t site, double x, double y, double z) const { return float(dist2(site, x, y, z)); }
@@ -371,6 +372,12 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   // Point sites: the offset from the site to p, so a neighbour's squared distance is three multiply-adds.
   Vec3d rel{};
   if constexpr (kPoints) rel = Vec3d{double(p.x), double(p.y), double(p.z)} - seeds_.points[site];
+  // Triangle sites: one precomputed triangle for every neighbour.
+  std::optional<TriangleDistance> tri;
+  if constexpr (!kPoints) {
+    const auto& t = seeds_.triangles[site];
+    tri.emplace(t[0], t[1], t[2]);
+  }
   // Only a brick reaching past the grid's far faces needs per-voxel bounds checks (the near faces are brick
   // faces, handled by the neighbouring-brick lookup).
   const bool edge = pb->origin.x + kBrickSize > dims_.x || pb->origin.y + kBrickSize > dims_.y ||
@@ -408,7 +415,11 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
       const double x = rel.x + d.fx, y = rel.y + d.fy, z = rel.z + d.fz;
       d2 = float(x * x + y * y + z * z);
     } else {
-      d2 = metric_.key2(site, p.x + d.x, p.y + d.y, p.z + d.z);
+      const Vec3d g{double(p.x + d.x), double(p.y + d.y), double(p.z + d.z)};
+      // The plane's distance bounds the triangle's from below: an offer it already shows to be worse is
+      // rejected without the full test (float rounding is monotone, so the outcome is the same).
+      if (k != kUntouched && float(tri->planeDist2(g)) > keyDist2(k)) continue;
+      d2 = float(tri->dist2(g));
     }
     const uint64_t newkey = packKey(d2, d.dir, site);
     if (k != kUntouched) {
