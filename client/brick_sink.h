@@ -1,0 +1,45 @@
+// BrickSink: turns the stream of delivered bricks (from the in-process engine or, later, the service) into an
+// output file. The writer is chosen by the output path's extension: ".npy" is a dense float32 array, ".vdb" an
+// OpenVDB level set (core/io/vdb_writer.h).
+// Contract:
+//   * openBrickSink() validates the path (known extension, writable location) before any compute starts and
+//     returns "" or a message naming the path. add() may be called once per delivered segment, in order.
+//     finish() writes the file and returns "" or a message; nothing is written before finish().
+//   * Voxels never delivered hold `background` (the distance limit, or +infinity without one); in a signed
+//     field, undelivered voxels labelled inside hold -background (OpenVDB's convention, negative inside).
+//   * To add a format, implement BrickSink and add one branch to openBrickSink().
+// Not thread-safe: feed it from one thread.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/brick.h"
+#include "core/grid.h"
+
+namespace distband {
+
+struct FieldLayout {
+  Grid grid;
+  float background = 0;                                ///< value of undelivered voxels (>= 0)
+  bool signed_distance = false;
+  std::shared_ptr<const std::vector<uint8_t>> inside;  ///< signed only: dense labels, nonzero = inside (may be null)
+  /// Signed without labels (meshes): undelivered voxels take the sign of the nearest delivered voxel along their
+  /// x row (the band encloses the surface, so a row enters and leaves the inside through delivered voxels).
+  bool sign_from_band = false;
+};
+
+class BrickSink {
+ public:
+  virtual ~BrickSink() = default;
+  virtual void add(const SegmentBricks& segment) = 0;
+  virtual std::string finish() = 0;
+  /// What finish() writes, for logs: "field.npy (float32, shape (Z, Y, X) = (64, 64, 64))".
+  virtual std::string description() const = 0;
+};
+
+std::string openBrickSink(const std::string& path, const FieldLayout& layout, std::unique_ptr<BrickSink>* out);
+
+}  // namespace distband

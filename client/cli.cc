@@ -1,0 +1,85 @@
+#include "client/cli.h"
+
+#include <algorithm>
+#include <atomic>
+#include <csignal>
+#include <exception>
+
+#include "client/compute_command.h"
+#ifdef DISTBAND_WITH_SERVICE
+#include "client/remote_commands.h"
+#endif
+
+namespace distband {
+namespace {
+
+std::atomic<bool> g_interrupted{false};
+
+extern "C" void onInterruptSignal(int sig) {
+  g_interrupted.store(true);
+  std::signal(sig, SIG_DFL);
+}
+
+std::vector<CliCommand> registerAllCommands(CLI::App& app, const CliContext& context) {
+  std::vector<CliCommand> commands;
+  commands.push_back(registerComputeCommand(app, context));
+#ifdef DISTBAND_WITH_SERVICE
+  for (CliCommand& c : registerRemoteCommands(app, context)) commands.push_back(std::move(c));
+#endif
+  return commands;
+}
+
+}  // namespace
+
+void installInterruptHandler() {
+  std::signal(SIGINT, onInterruptSignal);
+  std::signal(SIGTERM, onInterruptSignal);
+}
+
+bool interruptRequested() { return g_interrupted.load(); }
+
+int runDistband(const std::vector<std::string>& args, const CliContext& context) {
+  CLI::App app{"distband: sparse, streamed Euclidean distance fields (active-band distance transform)", "distband"};
+  app.require_subcommand(1);
+  app.fallthrough(false);
+  std::vector<CliCommand> commands;
+  try {
+    commands = registerAllCommands(app, context);
+    if (!args.empty() && !args[0].empty() && args[0][0] != '-') {
+      std::string names;
+      bool known = false;
+      for (const CliCommand& c : commands) {
+        known = known || c.app->get_name() == args[0];
+        names += (names.empty() ? "" : ", ") + c.app->get_name();
+      }
+      if (!known) {
+        context.err << "distband: unknown command '" << args[0] << "' (commands: " << names << ")\n"
+                    << "Run 'distband --help' for usage.\n";
+        return kExitUsage;
+      }
+    }
+    std::vector<std::string> reversed(args.rbegin(), args.rend());  // CLI11 consumes a reversed vector
+    app.parse(reversed);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e, context.out, context.err);
+    if (code == 0) return kExitOk;  // --help
+    context.err << "Run 'distband --help' or 'distband <command> --help' for usage.\n";
+    return kExitUsage;
+  } catch (const std::exception& e) {
+    context.err << "distband: " << e.what() << "\n";
+    return kExitUsage;
+  }
+  for (const CliCommand& c : commands) {
+    if (!c.app->parsed()) continue;
+    try {
+      return c.run();
+    } catch (const std::exception& e) {
+      context.err << "distband " << c.app->get_name() << ": internal error: " << e.what() << "\n";
+      return kExitFailure;
+    }
+  }
+  context.err << "distband: no command given\n";
+  return kExitUsage;
+}
+
+}  // namespace distband

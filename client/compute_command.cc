@@ -1,0 +1,319 @@
+#include "client/compute_command.h"
+
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+
+#include <fmt/format.h>
+
+#include "client/brick_sink.h"
+#include "core/engine.h"
+#include "core/io/field_metadata.h"
+#include "core/io/npy.h"
+#include "core/mesh/mesh_grid.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/seeds/mesh_seeds.h"
+#include "core/seeds/point_seeds.h"
+#include "core/seeds/volume_seeds.h"
+
+namespace distband {
+namespace {
+
+std::string_view trim(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) s.remove_suffix(1);
+  return s;
+}
+
+std::vector<std::string_view> split(std::string_view s, char sep) {
+  std::vector<std::string_view> parts;
+  size_t start = 0;
+  for (;;) {
+    const size_t at = s.find(sep, start);
+    parts.push_back(s.substr(start, at == std::string_view::npos ? std::string_view::npos : at - start));
+    if (at == std::string_view::npos) return parts;
+    start = at + 1;
+  }
+}
+
+bool parseDouble(std::string_view s, double* out) {
+  s = trim(s);
+  if (s.empty()) return false;
+  if (s.front() == '+') s.remove_prefix(1);
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), *out);
+  return r.ec == std::errc() && r.ptr == s.data() + s.size() && std::isfinite(*out);
+}
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+/// The seeds and the grid they live on, built from the command's input flags.
+struct SeedInput {
+  Grid grid;
+  Seeds seeds;
+  std::shared_ptr<const std::vector<uint8_t>> mask;  ///< volume input only
+  bool signed_distance = false;
+  bool mesh = false;
+  std::string description;
+};
+
+std::string buildMeshInput(const ComputeArgs& a, SeedInput* in) {
+  if (!a.dims.empty()) return "--dims does not apply to --mesh (use --resolution or --voxel-size)";
+  if ((a.resolution > 0) == a.voxel_size_given) return "--mesh needs exactly one of --resolution N or --voxel-size H";
+  if (a.resolution < 0) return fmt::format("--resolution must be > 0 (got {})", a.resolution);
+  if (a.padding < 0) return fmt::format("--padding must be >= 0 (got {})", a.padding);
+  MeshSeedOptions so;
+  if (!parseSignMethod(a.sign, &so.sign))
+    return fmt::format("--sign '{}': expected pseudonormal, winding, parity or unsigned", a.sign);
+  const std::string mode = a.mode == "exact" ? "exact-feature" : a.mode;
+  if (!parseMeshSiteMode(mode, &so.mode))
+    return fmt::format("--mode '{}': expected exact-feature (or exact) or paper for a mesh", a.mode);
+  TriangleMesh mesh;
+  MeshReport report;
+  if (std::string e = loadMesh(a.mesh, &mesh, &report); !e.empty()) return e;
+  MeshGridOptions go;
+  go.resolution = a.resolution;
+  go.voxel_size = a.voxel_size_given ? a.voxel_size : 0;
+  go.padding_voxels = a.padding;
+  if (std::string e = gridForMesh(mesh, go, &in->grid); !e.empty()) return e;
+  so.limit_voxels = a.limit / in->grid.voxelSize();
+  if (std::string e = makeMeshSeeds(in->grid, mesh, so, &in->seeds); !e.empty()) return fmt::format("{}: {}", a.mesh, e);
+  in->signed_distance = so.sign != SignMethod::kUnsigned;
+  in->mesh = true;
+  const Coord d = in->grid.dims();
+  in->description = fmt::format("mesh {} ({}; grid {}x{}x{}, sites {}, sign {})", a.mesh, report.summary(), d.x, d.y,
+                                d.z, meshSiteModeName(so.mode), signMethodName(so.sign));
+  return {};
+}
+
+std::string buildSeedInput(const ComputeArgs& a, SeedInput* in) {
+  const int sources = int(!a.volume.empty()) + int(!a.points.empty()) + int(!a.mesh.empty());
+  if (sources != 1)
+    return "give exactly one seed source: --volume MASK.npy, --points \"x,y,z;...\" or --mesh FILE";
+  if (a.signed_distance && a.volume.empty()) return "--signed needs --volume (meshes take --sign)";
+  if (!(std::isfinite(a.voxel_size) && a.voxel_size > 0))
+    return fmt::format("--voxel-size must be finite and > 0 (got {})", a.voxel_size);
+  if (!a.mesh.empty()) return buildMeshInput(a, in);
+  if (a.resolution != 0) return "--resolution applies to --mesh only";
+  in->signed_distance = a.signed_distance;
+  Vec3d origin;
+  if (std::string e = parseVec3(a.origin, "--origin", &origin); !e.empty()) return e;
+  const double voxel_size = a.voxel_size;
+  Coord dims{};
+  const bool have_dims = !a.dims.empty();
+  if (have_dims)
+    if (std::string e = parseDims(a.dims, &dims); !e.empty()) return e;
+  if (!a.volume.empty()) {
+    auto mask = std::make_shared<std::vector<uint8_t>>();
+    Coord mask_dims;
+    if (std::string e = readNpyMask(a.volume, mask.get(), &mask_dims); !e.empty()) return e;
+    if (have_dims && !(dims == mask_dims))
+      return fmt::format("--dims {}x{}x{} disagrees with {} of shape (Z, Y, X) = ({}, {}, {})", dims.x, dims.y, dims.z,
+                         a.volume, mask_dims.z, mask_dims.y, mask_dims.x);
+    in->grid = Grid(origin, voxel_size, mask_dims);
+    if (std::string e = in->grid.validate(); !e.empty()) return e;
+    if (std::string e = makeVolumeSeeds(in->grid, *mask, a.signed_distance, &in->seeds); !e.empty())
+      return fmt::format("{}: {}", a.volume, e);
+    in->mask = mask;
+    in->description = fmt::format("volume {} ({}x{}x{}, {})", a.volume, mask_dims.x, mask_dims.y, mask_dims.z,
+                                  a.signed_distance ? "signed" : "unsigned");
+    return {};
+  }
+  if (!have_dims) return "--points needs --dims X,Y,Z";
+  std::vector<Vec3d> points;
+  if (std::string e = parsePointList(a.points, &points); !e.empty()) return e;
+  in->grid = Grid(origin, voxel_size, dims);
+  if (std::string e = in->grid.validate(); !e.empty()) return e;
+  if (std::string e = makePointSeeds(in->grid, points, &in->seeds); !e.empty()) return "--points: " + e;
+  in->description = fmt::format("{} point{} in {}x{}x{}", points.size(), points.size() == 1 ? "" : "s", dims.x,
+                                dims.y, dims.z);
+  return {};
+}
+
+std::string rangeText(int index, double lower, double upper) {
+  return fmt::format("{}{:g}, {:g}]", index == 0 ? "[" : "(", lower, upper);
+}
+
+}  // namespace
+
+std::string parseVec3(std::string_view text, std::string_view flag, Vec3d* out) {
+  const std::vector<std::string_view> parts = split(text, ',');
+  double v[3];
+  if (parts.size() != 3) return fmt::format("{} '{}': expected three comma-separated numbers x,y,z", flag, text);
+  for (int i = 0; i < 3; ++i)
+    if (!parseDouble(parts[i], &v[i]))
+      return fmt::format("{} '{}': '{}' is not a finite number", flag, text, trim(parts[i]));
+  *out = {v[0], v[1], v[2]};
+  return {};
+}
+
+std::string parseDims(std::string_view text, Coord* out) {
+  const std::vector<std::string_view> parts = split(text, ',');
+  if (parts.size() != 3) return fmt::format("--dims '{}': expected three comma-separated integers X,Y,Z", text);
+  int v[3];
+  for (int i = 0; i < 3; ++i) {
+    const std::string_view p = trim(parts[i]);
+    const auto r = std::from_chars(p.data(), p.data() + p.size(), v[i]);
+    if (p.empty() || r.ec != std::errc() || r.ptr != p.data() + p.size())
+      return fmt::format("--dims '{}': '{}' is not an integer", text, p);
+    if (v[i] < 1 || v[i] > kMaxGridDim)
+      return fmt::format("--dims '{}': every extent must be in [1, {}]", text, kMaxGridDim);
+  }
+  *out = {v[0], v[1], v[2]};
+  return {};
+}
+
+std::string parsePointList(std::string_view text, std::vector<Vec3d>* out) {
+  std::vector<Vec3d> points;
+  int n = 0;
+  for (std::string_view item : split(text, ';')) {
+    ++n;
+    if (trim(item).empty()) continue;  // allows a trailing ';'
+    Vec3d p;
+    if (std::string e = parseVec3(item, fmt::format("--points (point {})", n), &p); !e.empty()) return e;
+    points.push_back(p);
+  }
+  if (points.empty()) return "--points: no point given (expected \"x,y,z;x,y,z;...\")";
+  *out = std::move(points);
+  return {};
+}
+
+int runCompute(const ComputeArgs& a, const CliContext& ctx) {
+  const auto t_start = Clock::now();
+  auto usage = [&](const std::string& msg) {
+    ctx.err << "distband compute: " << msg << "\n";
+    return kExitUsage;
+  };
+
+  EngineOptions options;
+  const std::optional<StencilKind> stencil = parseStencil(a.stencil);
+  if (!stencil) return usage(fmt::format("--stencil '{}': expected cubic26, cubic18, cubic6 or fcc12", a.stencil));
+  options.stencil = *stencil;
+  if (a.mesh.empty() && !parseMode(a.mode, &options.mode))
+    return usage(fmt::format("--mode '{}': expected exact or paper", a.mode));
+  // Meshes: the site mode picks what propagates; the engine runs its lifespan band (the second-ring correction
+  // costs ~4x on triangle sites for ~0.01 voxel, so it is opt-in).
+  if (!a.mesh.empty()) options.mode = a.second_ring ? PropagationMode::kExact : PropagationMode::kPaper;
+  options.segment_length_world = a.segment;
+  options.limit_world = a.limit;
+  options.threads = a.threads;
+  if (std::isnan(a.limit) || a.limit <= 0) return usage(fmt::format("--limit must be > 0 (got {})", a.limit));
+  if (!(a.segment >= 0) || std::isinf(a.segment))
+    return usage(fmt::format("--segment must be finite and >= 0 (got {})", a.segment));
+  if (a.threads < 0) return usage(fmt::format("--threads must be >= 0 (got {})", a.threads));
+
+  SeedInput in;
+  if (std::string e = buildSeedInput(a, &in); !e.empty()) return usage(e);
+  if (std::string e = validateOptions(in.grid, options); !e.empty()) return usage(e);
+
+  FieldLayout layout;
+  layout.grid = in.grid;
+  layout.background = std::isfinite(a.limit) ? float(a.limit) : std::numeric_limits<float>::infinity();
+  layout.signed_distance = in.signed_distance;
+  layout.inside = in.mask;
+  layout.sign_from_band = in.mesh && in.signed_distance;
+  std::unique_ptr<BrickSink> sink;
+  if (std::string e = openBrickSink(a.out, layout, &sink); !e.empty()) return usage("--out " + e);
+  if (!a.meta.empty() && std::filesystem::is_directory(a.meta)) return usage("--meta " + a.meta + ": is a directory");
+
+  ctx.out << fmt::format("distband compute: {}, voxel size {:g}, stencil {}, mode {}, segment {}, limit {}, threads {}\n",
+                         in.description, in.grid.voxelSize(), stencilName(options.stencil), modeName(options.mode),
+                         a.segment > 0 ? fmt::format("{:g}", a.segment) : std::string("none"),
+                         std::isfinite(a.limit) ? fmt::format("{:g}", a.limit) : std::string("none"),
+                         a.threads > 0 ? std::to_string(a.threads) : std::string("all"));
+  ctx.out.flush();
+
+  options.interrupted = ctx.interrupted;
+  auto t_segment = Clock::now();
+  EngineResult result;
+  try {
+    result = computeDistanceField(in.grid, in.seeds, options, [&](SegmentBricks&& seg) {
+      int64_t voxels = 0;
+      for (const Brick& b : seg.bricks) voxels += b.mask.count();
+      sink->add(seg);
+      ctx.out << fmt::format("segment {:>3}  {:<18} voxels {:>11}  bricks {:>8}  {:8.3f} s\n", seg.index,
+                             rangeText(seg.index, seg.lower_world, seg.upper_world), voxels, seg.bricks.size(),
+                             secondsSince(t_segment));
+      ctx.out.flush();
+      t_segment = Clock::now();
+    });
+  } catch (const std::invalid_argument& e) {
+    return usage(e.what());
+  } catch (const std::exception& e) {
+    ctx.err << "distband compute: the engine failed: " << e.what() << "\n";
+    return kExitFailure;
+  }
+  const double engine_seconds = secondsSince(t_start);
+  if (result.interrupted) {
+    ctx.err << "distband compute: interrupted; nothing written\n";
+    return kExitInterrupted;
+  }
+  const auto t_write = Clock::now();
+  if (std::string e = sink->finish(); !e.empty()) {
+    ctx.err << "distband compute: " << e << "\n";
+    return kExitFailure;
+  }
+  if (!a.meta.empty()) {
+    FieldMetadata meta;
+    meta.grid = in.grid;
+    meta.data_file = std::filesystem::path(a.out).filename().string();
+    meta.signed_distance = in.signed_distance;
+    meta.limit_world = a.limit;
+    meta.background_world = layout.background;
+    meta.stencil = std::string(stencilName(options.stencil));
+    meta.mode = std::string(modeName(options.mode));
+    meta.segment_length_world = a.segment;
+    meta.voxels_delivered = result.voxels;
+    meta.seconds = result.seconds;
+    if (std::string e = writeFieldMetadata(a.meta, meta); !e.empty()) {
+      ctx.err << "distband compute: " << e << "\n";
+      return kExitFailure;
+    }
+  }
+  ctx.out << fmt::format(
+      "done: {} voxels in {} segment{}, {} steps, {} updates, {} corrections, {} bricks allocated; engine {:.3f} s, "
+      "total {:.3f} s (write {:.3f} s)\nwrote {}{}\n",
+      result.voxels, result.segments.size(), result.segments.size() == 1 ? "" : "s", result.steps, result.updates,
+      result.corrections, result.bricks_allocated, result.seconds, engine_seconds + secondsSince(t_write),
+      secondsSince(t_write), sink->description(), a.meta.empty() ? "" : " and " + a.meta);
+  return kExitOk;
+}
+
+CliCommand registerComputeCommand(CLI::App& app, const CliContext& context) {
+  auto args = std::make_shared<ComputeArgs>();
+  CLI::App* cmd = app.add_subcommand("compute", "Compute a distance field in-process and write it to a file");
+  auto* volume = cmd->add_option("--volume", args->volume, "Seed mask: .npy uint8/bool, shape (Z, Y, X); nonzero = seed");
+  auto* sgn = cmd->add_flag("--signed", args->signed_distance, "Signed distance to the mask boundary (negative inside)");
+  auto* points = cmd->add_option("--points", args->points, "Seed points in world coordinates: \"x,y,z;x,y,z\"");
+  volume->excludes(points);
+  sgn->needs(volume);
+  cmd->add_option("--dims", args->dims, "Grid dims X,Y,Z (required with --points; taken from the mask otherwise)");
+  auto* mesh = cmd->add_option("--mesh", args->mesh, "Triangle mesh (OBJ, OFF, PLY, STL): signed distance to it");
+  mesh->excludes(volume);
+  mesh->excludes(points);
+  cmd->add_option("--resolution", args->resolution, "Mesh: voxels along the longest side of the padded box (N^3)");
+  cmd->add_option("--padding", args->padding, "Mesh: margin around the mesh in voxels")->default_val(3);
+  cmd->add_option("--sign", args->sign, "Mesh: pseudonormal | winding | parity | unsigned")->default_val("pseudonormal");
+  cmd->add_flag("--second-ring", args->second_ring, "Mesh: also run the engine's second-ring correction (slower)");
+  cmd->add_option("--voxel-size", args->voxel_size, "Voxel size in world units (default 1; meshes: or --resolution)")
+      ->default_val(1.0);
+  cmd->add_option("--origin", args->origin, "World position of voxel (0,0,0): x,y,z")->default_val("0,0,0");
+  cmd->add_option("--stencil", args->stencil, "cubic26 | cubic18 | cubic6 | fcc12")->default_val("cubic26");
+  cmd->add_option("--mode", args->mode,
+                  "exact (default) | paper (the SMI 2009 lifespan method); meshes: exact-feature | paper")
+      ->default_val("exact");
+  cmd->add_option("--segment", args->segment, "Segment length in world units (0: one segment)")->default_val(0);
+  cmd->add_option("--limit", args->limit, "Distance limit in world units (default: none)");
+  cmd->add_option("--threads", args->threads, "Worker threads (0: all cores)")->default_val(0);
+  cmd->add_option("--out", args->out, "Output file: .npy (dense float32, shape (Z, Y, X)) or .vdb (OpenVDB level set)")
+      ->required();
+  cmd->add_option("--meta", args->meta, "Also write a JSON description of the field (grid, units, limit, sign)");
+  return {cmd, [args, &context, cmd]() {
+            args->voxel_size_given = cmd->count("--voxel-size") > 0;
+            return runCompute(*args, context);
+          }};
+}
+
+}  // namespace distband

@@ -1,0 +1,480 @@
+#include "client/remote_commands.h"
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <thread>
+
+#include <fmt/format.h>
+#include <openvdb/openvdb.h>
+
+#include "client/brick_sink.h"
+#include "client/compute_command.h"
+#include "client/progress.h"
+#include "client/remote_client.h"
+#include "core/io/isosurface.h"
+#include "core/io/npy.h"
+#include "core/io/slice_png.h"
+#include "core/io/vdb_writer.h"
+
+namespace distband {
+namespace {
+
+struct QueryArgs {
+  std::string server = "127.0.0.1:50051";
+  std::string mesh, points, volume, asset;
+  int resolution = 0;
+  int padding = -1;  ///< -1: the server's default
+  double voxel_size = 0;
+  std::string dims, origin, box;
+  std::string stencil = "cubic26", mode = "exact", sign, encoding = "float32", progress = "auto";
+  double segment = 0;
+  double limit = 0;
+  double deadline_s = 0;
+  std::string out, npy;
+  std::vector<std::string> slice_png;   ///< AXIS:INDEX PNG
+  std::vector<std::string> isosurface;  ///< D OBJ
+};
+
+struct ServerArg {
+  std::string server = "127.0.0.1:50051";
+};
+
+/// Exit code of a failed RPC: the caller's fault -> usage (2), otherwise failure (1).
+int exitCodeOf(const grpc::Status& s) {
+  switch (s.error_code()) {
+    case grpc::StatusCode::INVALID_ARGUMENT:
+    case grpc::StatusCode::NOT_FOUND:
+    case grpc::StatusCode::OUT_OF_RANGE: return kExitUsage;
+    case grpc::StatusCode::CANCELLED: return kExitInterrupted;
+    default: return kExitFailure;
+  }
+}
+
+std::string describe(const grpc::Status& s) {
+  static const char* names[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT", "DEADLINE_EXCEEDED", "NOT_FOUND",
+                                "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
+                                "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED", "INTERNAL", "UNAVAILABLE", "DATA_LOSS",
+                                "UNAUTHENTICATED"};
+  const int c = int(s.error_code());
+  return fmt::format("{}: {}", c >= 0 && c <= 16 ? names[c] : "ERROR", s.error_message());
+}
+
+template <typename Enum>
+bool pick(const std::string& text, std::initializer_list<std::pair<const char*, Enum>> table, Enum* out) {
+  for (const auto& [name, value] : table)
+    if (text == name) {
+      *out = value;
+      return true;
+    }
+  return false;
+}
+
+void setVec(v1::Vec3* v, const Vec3d& p) {
+  v->set_x(p.x);
+  v->set_y(p.y);
+  v->set_z(p.z);
+}
+
+/// Builds the request (and uploads a mesh/volume first). Returns "" or a usage message; *status on RPC errors.
+std::string buildRequest(const QueryArgs& a, RemoteClient& client, const CliContext& ctx, v1::QueryRequest* r,
+                         grpc::Status* status) {
+  const int sources = int(!a.mesh.empty()) + int(!a.points.empty()) + int(!a.volume.empty()) + int(!a.asset.empty());
+  if (sources != 1) return "give exactly one seed source: --mesh, --points, --volume or --asset";
+  if (!a.mesh.empty()) {
+    v1::UploadReply up;
+    *status = client.uploadMeshFile(a.mesh, &up);
+    if (!status->ok()) return {};
+    ctx.out << fmt::format("uploaded {}: {} ({} triangles{})\n", a.mesh, up.asset_id(), up.mesh().triangles(),
+                           up.already_cached() ? ", already cached" : "");
+    r->set_asset_id(up.asset_id());
+  } else if (!a.volume.empty()) {
+    std::vector<uint8_t> mask;
+    Coord dims;
+    if (std::string e = readNpyMask(a.volume, &mask, &dims); !e.empty()) return e;
+    v1::UploadReply up;
+    *status = client.uploadVolume(dims, mask, a.volume, &up);
+    if (!status->ok()) return {};
+    ctx.out << fmt::format("uploaded {}: {}\n", a.volume, up.asset_id());
+    r->set_asset_id(up.asset_id());
+  } else if (!a.points.empty()) {
+    std::vector<Vec3d> pts;
+    if (std::string e = parsePointList(a.points, &pts); !e.empty()) return e;
+    for (const Vec3d& p : pts) setVec(r->mutable_points()->add_points(), p);
+  } else {
+    r->set_asset_id(a.asset);
+  }
+  v1::GridSpec* g = r->mutable_grid();
+  if (a.voxel_size != 0) g->set_voxel_size(a.voxel_size);
+  if (a.resolution != 0) g->set_resolution(uint32_t(std::max(0, a.resolution)));
+  if (a.padding >= 0) g->set_padding(uint32_t(a.padding));
+  if (!a.dims.empty()) {
+    Coord d;
+    if (std::string e = parseDims(a.dims, &d); !e.empty()) return e;
+    g->mutable_dims()->set_x(uint32_t(d.x));
+    g->mutable_dims()->set_y(uint32_t(d.y));
+    g->mutable_dims()->set_z(uint32_t(d.z));
+  }
+  if (!a.origin.empty()) {
+    Vec3d o;
+    if (std::string e = parseVec3(a.origin, "--origin", &o); !e.empty()) return e;
+    setVec(g->mutable_origin(), o);
+  }
+  if (!a.box.empty()) {
+    const size_t comma = [&] {
+      size_t n = 0, i = 0;
+      for (; i < a.box.size(); ++i)
+        if (a.box[i] == ',' && ++n == 3) break;
+      return i;
+    }();
+    if (comma >= a.box.size()) return "--box: expected six comma-separated numbers x0,y0,z0,x1,y1,z1";
+    Vec3d lo, hi;
+    if (std::string e = parseVec3(a.box.substr(0, comma), "--box (min)", &lo); !e.empty()) return e;
+    if (std::string e = parseVec3(a.box.substr(comma + 1), "--box (max)", &hi); !e.empty()) return e;
+    setVec(g->mutable_box()->mutable_min(), lo);
+    setVec(g->mutable_box()->mutable_max(), hi);
+  }
+  v1::Stencil stencil;
+  if (!pick(a.stencil, {{"cubic6", v1::STENCIL_CUBIC6}, {"cubic18", v1::STENCIL_CUBIC18},
+                        {"cubic26", v1::STENCIL_CUBIC26}, {"fcc12", v1::STENCIL_FCC12}}, &stencil))
+    return fmt::format("--stencil '{}': expected cubic6, cubic18, cubic26 or fcc12", a.stencil);
+  r->set_stencil(stencil);
+  v1::PropagationMode mode;
+  if (!pick(a.mode, {{"exact", v1::PROPAGATION_MODE_EXACT}, {"exact-feature", v1::PROPAGATION_MODE_EXACT},
+                     {"paper", v1::PROPAGATION_MODE_PAPER}}, &mode))
+    return fmt::format("--mode '{}': expected exact (exact-feature) or paper", a.mode);
+  r->set_mode(mode);
+  if (!a.sign.empty()) {
+    v1::SignMode sign;
+    if (!pick(a.sign, {{"unsigned", v1::SIGN_MODE_UNSIGNED}, {"pseudonormal", v1::SIGN_MODE_PSEUDONORMAL},
+                       {"winding", v1::SIGN_MODE_WINDING}, {"parity", v1::SIGN_MODE_PARITY},
+                       {"mask-inside", v1::SIGN_MODE_MASK_INSIDE}}, &sign))
+      return fmt::format("--sign '{}': expected pseudonormal, winding, parity, unsigned or mask-inside", a.sign);
+    r->set_sign(sign);
+  }
+  v1::BrickEncoding enc;
+  if (!pick(a.encoding, {{"float32", v1::BRICK_ENCODING_FLOAT32}, {"float16", v1::BRICK_ENCODING_FLOAT16}}, &enc))
+    return fmt::format("--encoding '{}': expected float32 or float16", a.encoding);
+  r->set_encoding(enc);
+  r->set_segment_length(a.segment);
+  r->set_limit(a.limit);
+  return {};
+}
+
+int runQuery(const QueryArgs& a, const CliContext& ctx) {
+  auto usage = [&](const std::string& msg) {
+    ctx.err << "distband query: " << msg << "\n";
+    return kExitUsage;
+  };
+  // Validate every output request before any network traffic.
+  if (a.out.empty() && a.npy.empty() && a.slice_png.empty() && a.isosurface.empty())
+    return usage("nothing to write: give --out, --npy, --slice-png or --isosurface");
+  const bool out_vdb = a.out.size() > 4 && a.out.substr(a.out.size() - 4) == ".vdb";
+  const bool out_npy = a.out.size() > 4 && a.out.substr(a.out.size() - 4) == ".npy";
+  if (!a.out.empty() && !out_vdb && !out_npy) return usage(fmt::format("--out '{}': expected a .vdb or .npy path", a.out));
+  const std::string npy_path = out_npy ? a.out : a.npy;
+  const bool need_vdb = out_vdb || !a.slice_png.empty() || !a.isosurface.empty();
+  if (need_vdb && !(a.limit > 0 && std::isfinite(a.limit)))
+    return usage("a .vdb, --slice-png or --isosurface needs a finite --limit (the level set's background)");
+  SliceSpec slice;
+  if (!a.slice_png.empty()) {
+    if (a.slice_png.size() != 2) return usage("--slice-png takes AXIS:INDEX and a PNG path");
+    if (std::string e = parseSliceSpec(a.slice_png[0], &slice); !e.empty()) return usage("--slice-png: " + e);
+  }
+  double iso = 0;
+  if (!a.isosurface.empty()) {
+    if (a.isosurface.size() != 2) return usage("--isosurface takes a distance D and an OBJ path");
+    try {
+      size_t used = 0;
+      iso = std::stod(a.isosurface[0], &used);
+      if (used != a.isosurface[0].size() || !std::isfinite(iso)) throw std::invalid_argument("x");
+    } catch (const std::exception&) {
+      return usage(fmt::format("--isosurface: '{}' is not a finite number", a.isosurface[0]));
+    }
+  }
+  ProgressMode pmode;
+  if (!pick(a.progress, {{"auto", ProgressMode::kAuto}, {"plain", ProgressMode::kPlain},
+                         {"quiet", ProgressMode::kQuiet}, {"terminal", ProgressMode::kTerminal}}, &pmode))
+    return usage(fmt::format("--progress '{}': expected auto, plain, terminal or quiet", a.progress));
+
+  RemoteClient client(a.server);
+  v1::QueryRequest request;
+  grpc::Status status;
+  if (std::string e = buildRequest(a, client, ctx, &request, &status); !e.empty()) return usage(e);
+  if (!status.ok()) {
+    ctx.err << "distband query: upload failed: " << describe(status) << "\n";
+    return exitCodeOf(status);
+  }
+
+  std::unique_ptr<VdbFieldBuilder> vdb;
+  std::unique_ptr<BrickSink> npy;
+  std::unique_ptr<ProgressDisplay> progress;
+  std::string setup_error;
+  RemoteQueryCallbacks cb;
+  cb.on_header = [&](const Grid& grid, const v1::QueryHeader& h) {
+    ctx.out << fmt::format("query {}: grid {}x{}x{}, voxel size {:g}, origin ({:g}, {:g}, {:g}), limit {:g}, {}\n",
+                           h.query_id(), grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
+                           grid.origin().x, grid.origin().y, grid.origin().z, h.limit(),
+                           h.signed_() ? "signed" : "unsigned");
+    if (need_vdb) vdb = std::make_unique<VdbFieldBuilder>(grid, float(h.limit()));
+    if (!npy_path.empty()) {
+      FieldLayout layout;
+      layout.grid = grid;
+      layout.background = float(h.limit());
+      layout.signed_distance = h.signed_();
+      layout.sign_from_band = h.signed_();  // no inside labels on the client: signs come from the delivered band
+      if (std::string e = openBrickSink(npy_path, layout, &npy); !e.empty()) {
+        setup_error = e;
+        return false;
+      }
+    }
+    if (!a.slice_png.empty())
+      if (std::string e = resolveSlice(grid, &slice); !e.empty()) {
+        setup_error = "--slice-png: " + e;
+        return false;
+      }
+    ProgressOptions po;
+    po.mode = pmode;
+    po.limit_world = h.limit();
+    po.segment_length_world = h.segment_length();
+    progress = std::make_unique<ProgressDisplay>(po);
+    return true;
+  };
+  uint64_t segment_bytes = 0;
+  cb.on_bricks = [&](SegmentBricks&& batch, uint64_t bytes) {
+    segment_bytes += bytes;
+    if (vdb) vdb->add(batch);
+    if (npy) npy->add(batch);
+    progress->onData(int64_t(batch.bricks.size()), bytes);
+    return true;
+  };
+  cb.on_segment_done = [&](const v1::SegmentDone& d) {
+    SegmentProgress sp;
+    sp.index = int(d.segment());
+    sp.lower_world = d.lower();
+    sp.upper_world = d.upper();
+    sp.bricks = int64_t(d.bricks());
+    sp.voxels = int64_t(d.voxels());
+    sp.bytes = segment_bytes;
+    segment_bytes = 0;
+    sp.last = d.last();
+    progress->onSegment(sp);
+    return true;
+  };
+
+  // SIGINT/SIGTERM: cancel the query on the server (the engine stops) and write nothing.
+  QueryCanceller canceller;
+  std::atomic<bool> done{false};
+  std::thread watcher([&] {
+    while (!done.load()) {
+      if (ctx.interrupted && ctx.interrupted()) {
+        canceller.cancel();
+        return;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+  });
+  RemoteQueryOptions qo;
+  qo.canceller = &canceller;
+  qo.deadline = std::chrono::milliseconds(int64_t(a.deadline_s * 1000));
+  const RemoteQueryResult result = client.query(request, cb, qo);
+  done = true;
+  watcher.join();
+
+  if (!setup_error.empty()) {
+    if (progress) progress->finish(false, setup_error);
+    return usage(setup_error);
+  }
+  if (!result.status.ok()) {
+    if (progress) progress->finish(false, describe(result.status));
+    if (canceller.cancelled()) {
+      ctx.err << "distband query: interrupted; the server stopped the query and nothing was written\n";
+      return kExitInterrupted;
+    }
+    ctx.err << "distband query: " << describe(result.status) << "\n";
+    return result.status.error_code() == grpc::StatusCode::CANCELLED ? kExitFailure : exitCodeOf(result.status);
+  }
+  progress->finish(true);
+  const v1::QuerySummary& s = result.summary;
+  ctx.out << "segment  range                 voxels      bricks   compute_s  sent_at_s\n";
+  for (const v1::SegmentTiming& t : s.segments())
+    ctx.out << fmt::format("{:>7}  {}{:<9.4g},{:>9.4g}] {:>10} {:>10} {:>10.4f} {:>10.4f}\n", t.segment(),
+                           t.segment() == 0 ? "[" : "(", t.lower(), t.upper(), t.voxels(), t.bricks(),
+                           t.compute_seconds(), t.sent_seconds());
+  ctx.out << fmt::format(
+      "{} voxels, {} bricks, {} messages, {:.1f} MB; server: seeds {:.3f}s, compute {:.3f}s, total {:.3f}s; "
+      "client: first bricks after {:.3f}s, done after {:.3f}s\n",
+      s.voxels(), s.bricks(), result.messages, result.wire_bytes / 1e6, s.seed_seconds(), s.compute_seconds(),
+      s.total_seconds(), result.first_bricks_seconds, result.total_seconds);
+
+  int code = kExitOk;
+  auto fail = [&](const std::string& what) {
+    ctx.err << "distband query: " << what << "\n";
+    code = kExitFailure;
+  };
+  if (npy) {
+    if (std::string e = npy->finish(); !e.empty()) fail(e);
+    else ctx.out << "wrote " << npy->description() << "\n";
+  }
+  if (vdb) {
+    vdb->finish();
+    if (out_vdb) {
+      if (std::string e = vdb->write(a.out); !e.empty()) fail(e);
+      else ctx.out << fmt::format("wrote {} (OpenVDB level set, {} active voxels)\n", a.out, vdb->activeVoxels());
+    }
+    auto grid = std::static_pointer_cast<openvdb::FloatGrid>(vdb->gridHandle());
+    if (!a.slice_png.empty()) {
+      auto acc = grid->getConstAccessor();
+      const VoxelSampler sample = [&](const Coord& c) { return acc.getValue(openvdb::Coord(c.x, c.y, c.z)); };
+      SlicePngOptions so;
+      so.limit_world = a.limit;
+      if (std::string e = writeSlicePng(a.slice_png[1], result.grid, sample, slice, so); !e.empty()) fail(e);
+      else ctx.out << "wrote " << a.slice_png[1] << " (slice " << a.slice_png[0] << ")\n";
+    }
+    if (!a.isosurface.empty()) {
+      TriangleMeshF mesh;
+      IsosurfaceOptions io;
+      io.distance_world = iso;
+      if (std::string e = writeIsosurfaceObj(a.isosurface[1], *grid, io, &mesh); !e.empty()) fail(e);
+      else
+        ctx.out << fmt::format("wrote {} (isosurface at {:g}: {} vertices, {} triangles)\n", a.isosurface[1], iso,
+                               mesh.vertices.size(), mesh.triangles.size());
+    }
+  }
+  return code;
+}
+
+CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
+  auto args = std::make_shared<QueryArgs>();
+  CLI::App* cmd = app.add_subcommand("query", "Compute a distance field on a distband server and write it");
+  cmd->add_option("--server", args->server, "Server address HOST:PORT")->capture_default_str();
+  cmd->add_option("--mesh", args->mesh, "Seed mesh (.obj .off .ply .stl), uploaded first");
+  cmd->add_option("--points", args->points, "Seed points in world coordinates: \"x,y,z;x,y,z\"");
+  cmd->add_option("--volume", args->volume, "Seed mask .npy (uint8/bool, shape (Z, Y, X)), uploaded first");
+  cmd->add_option("--asset", args->asset, "A previously uploaded asset id");
+  cmd->add_option("--resolution", args->resolution, "Voxels along the longest side (the paper's N^3)");
+  cmd->add_option("--padding", args->padding, "Margin around the seeds' bounds, voxels (server default 3)");
+  cmd->add_option("--voxel-size", args->voxel_size, "Voxel size in world units");
+  cmd->add_option("--dims", args->dims, "Explicit grid dims X,Y,Z (with --voxel-size; volumes: the mask's)");
+  cmd->add_option("--origin", args->origin, "World position of voxel (0,0,0) with --dims: x,y,z");
+  cmd->add_option("--box", args->box, "Explicit world box x0,y0,z0,x1,y1,z1");
+  cmd->add_option("--stencil", args->stencil, "cubic26 | cubic18 | cubic6 | fcc12")->capture_default_str();
+  cmd->add_option("--mode", args->mode, "exact (exact-feature for meshes) | paper")->capture_default_str();
+  cmd->add_option("--sign", args->sign,
+                  "pseudonormal | winding | parity | unsigned (meshes), mask-inside | unsigned (volumes)");
+  cmd->add_option("--segment", args->segment, "Segment length in world units (0: one segment)");
+  cmd->add_option("--limit", args->limit, "Distance limit in world units (0: none)");
+  cmd->add_option("--encoding", args->encoding, "float32 | float16")->capture_default_str();
+  cmd->add_option("--deadline", args->deadline_s, "Give up after this many seconds (0: never)");
+  cmd->add_option("--progress", args->progress, "auto | plain | terminal | quiet")->capture_default_str();
+  cmd->add_option("--out", args->out, "Output: FIELD.vdb (OpenVDB level set) or FIELD.npy (dense float32)");
+  cmd->add_option("--npy", args->npy, "Also write a dense float32 .npy (small grids)");
+  cmd->add_option("--slice-png", args->slice_png, "AXIS:INDEX PNG — a colour-mapped slice with the zero contour")
+      ->expected(2);
+  cmd->add_option("--isosurface", args->isosurface, "D OBJ — the surface at distance D as a Wavefront OBJ")
+      ->expected(2);
+  return {cmd, [args, &ctx] { return runQuery(*args, ctx); }};
+}
+
+CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
+  struct Args {
+    std::string server = "127.0.0.1:50051", mesh, volume;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("upload", "Upload a mesh or seed volume to a distband server's cache");
+  cmd->add_option("--server", args->server, "Server address HOST:PORT")->capture_default_str();
+  cmd->add_option("--mesh", args->mesh, "Mesh file (.obj .off .ply .stl)");
+  cmd->add_option("--volume", args->volume, "Seed mask .npy (uint8/bool, shape (Z, Y, X))");
+  return {cmd, [args, &ctx] {
+            if (args->mesh.empty() == args->volume.empty()) {
+              ctx.err << "distband upload: give exactly one of --mesh and --volume\n";
+              return kExitUsage;
+            }
+            RemoteClient client(args->server);
+            v1::UploadReply up;
+            grpc::Status s;
+            if (!args->mesh.empty()) {
+              s = client.uploadMeshFile(args->mesh, &up);
+            } else {
+              std::vector<uint8_t> mask;
+              Coord dims;
+              if (std::string e = readNpyMask(args->volume, &mask, &dims); !e.empty()) {
+                ctx.err << "distband upload: " << e << "\n";
+                return kExitUsage;
+              }
+              s = client.uploadVolume(dims, mask, args->volume, &up);
+            }
+            if (!s.ok()) {
+              ctx.err << "distband upload: " << describe(s) << "\n";
+              return exitCodeOf(s);
+            }
+            ctx.out << up.asset_id() << "\n";
+            if (up.has_mesh())
+              ctx.out << fmt::format("mesh: {} vertices, {} triangles, {} degenerate dropped, {} boundary edges\n",
+                                     up.mesh().vertices(), up.mesh().triangles(), up.mesh().degenerate_triangles(),
+                                     up.mesh().boundary_edges());
+            ctx.out << fmt::format("{} bytes{}\n", up.bytes(), up.already_cached() ? " (already cached)" : "");
+            return kExitOk;
+          }};
+}
+
+CliCommand registerInfo(CLI::App& app, const CliContext& ctx) {
+  auto args = std::make_shared<ServerArg>();
+  CLI::App* cmd = app.add_subcommand("info", "Show a distband server's version, limits and options");
+  cmd->add_option("--server", args->server, "Server address HOST:PORT")->capture_default_str();
+  return {cmd, [args, &ctx] {
+            RemoteClient client(args->server);
+            v1::ServerInfo i;
+            if (grpc::Status s = client.info(&i); !s.ok()) {
+              ctx.err << "distband info: " << describe(s) << "\n";
+              return exitCodeOf(s);
+            }
+            auto join = [](const auto& list) {
+              std::string s;
+              for (const auto& x : list) s += (s.empty() ? "" : ", ") + x;
+              return s;
+            };
+            ctx.out << fmt::format(
+                "version            {}\ncompute threads    {}\nmax queries        {} ({} active)\n"
+                "max voxels/query   {}\nmax upload bytes   {}\ncache bytes        {} ({} used)\n"
+                "max message bytes  {}\nstencils           {}\nmodes              {}\nsign modes         {}\n"
+                "mesh formats       {}\nencodings          {}\n",
+                i.version(), i.compute_threads(), i.max_concurrent_queries(), i.active_queries(),
+                i.max_voxels_per_query(), i.max_upload_bytes(), i.cache_bytes(), i.cache_used_bytes(),
+                i.max_message_bytes(), join(i.stencils()), join(i.modes()), join(i.sign_modes()),
+                join(i.mesh_formats()), join(i.encodings()));
+            return kExitOk;
+          }};
+}
+
+CliCommand registerHealth(CLI::App& app, const CliContext& ctx) {
+  struct Args {
+    std::string server = "127.0.0.1:50051", service;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("health", "grpc.health.v1 check of a distband server (exit 0 iff SERVING)");
+  cmd->add_option("--server", args->server, "Server address HOST:PORT")->capture_default_str();
+  cmd->add_option("--service", args->service, "Service name (\"\": the whole server)");
+  return {cmd, [args, &ctx] {
+            RemoteClient client(args->server);
+            bool serving = false;
+            std::string name;
+            if (grpc::Status s = client.health(args->service, &serving, &name); !s.ok()) {
+              ctx.err << "distband health: " << describe(s) << "\n";
+              return kExitFailure;
+            }
+            ctx.out << name << "\n";
+            return serving ? kExitOk : kExitFailure;
+          }};
+}
+
+}  // namespace
+
+std::vector<CliCommand> registerRemoteCommands(CLI::App& app, const CliContext& context) {
+  return {registerQuery(app, context), registerUpload(app, context), registerInfo(app, context),
+          registerHealth(app, context)};
+}
+
+}  // namespace distband

@@ -1,0 +1,51 @@
+// distband-server: serves distband.v1.DistanceField over gRPC. See server/flags.cc for the flags and
+// docs/protocol.md for the protocol. SIGTERM/SIGINT: stop accepting queries, let running streams finish within
+// --grace-seconds, exit 0.
+#include <pthread.h>
+#include <signal.h>
+
+#include <chrono>
+#include <cstdio>
+
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include "server/flags.h"
+#include "server/server.h"
+
+int main(int argc, char** argv) {
+  distband::ServerOptions options;
+  CLI::App app{"distband-server: distance fields over gRPC (distband.v1.DistanceField)"};
+  app.set_version_flag("--version", DISTBAND_VERSION);
+  distband::addServerFlags(app, &options);
+  std::string log_level = "info";
+  app.add_option("--log-level", log_level, "trace, debug, info, warn, error, off")->capture_default_str();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+  if (std::string e = options.validate(); !e.empty()) {
+    std::fprintf(stderr, "distband-server: %s\n", e.c_str());
+    return 2;
+  }
+  spdlog::set_level(spdlog::level::from_str(log_level));
+
+  // Handle SIGINT/SIGTERM on one dedicated thread: block them everywhere before any other thread starts.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  distband::DistbandServer server(options);
+  if (grpc::Status s = server.start(); !s.ok()) {
+    std::fprintf(stderr, "distband-server: %s\n", s.error_message().c_str());
+    return 1;
+  }
+  int sig = 0;
+  sigwait(&signals, &sig);
+  spdlog::info("received {}", sig == SIGTERM ? "SIGTERM" : "SIGINT");
+  server.shutdown(std::chrono::milliseconds(int64_t(options.grace_seconds * 1000)));
+  return 0;
+}

@@ -1,0 +1,239 @@
+#include "server/request_validation.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "core/mesh/mesh_grid.h"
+#include "server/asset_parsing.h"
+
+namespace distband {
+namespace {
+
+grpc::Status invalid(std::string message) { return {grpc::StatusCode::INVALID_ARGUMENT, std::move(message)}; }
+
+bool finite(const v1::Vec3& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
+Vec3d toVec(const v1::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+
+constexpr uint32_t kMaxPadding = 4096;
+constexpr int kMaxPoints = 1 << 20;
+constexpr double kMaxSegments = 100000;
+
+grpc::Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, AssetCache& cache,
+                          ResolvedQuery* q) {
+  switch (r.seeds_case()) {
+    case v1::QueryRequest::kAssetId: {
+      if (r.asset_id().empty() || r.asset_id().size() > 128)
+        return invalid(fmt::format("asset_id must be an id returned by an upload (got {} characters)",
+                                   r.asset_id().size()));
+      q->asset = cache.find(r.asset_id());
+      if (!q->asset)
+        return {grpc::StatusCode::NOT_FOUND,
+                fmt::format("asset_id: no asset '{}' in the cache (never uploaded, or evicted: upload it again)",
+                            r.asset_id())};
+      q->seed_kind = q->asset->kind == Asset::Kind::kMesh ? ResolvedQuery::SeedKind::kMesh
+                                                           : ResolvedQuery::SeedKind::kVolume;
+      q->seeds_label = q->asset->id.substr(0, std::min<size_t>(q->asset->id.size(), 17)) +
+                       (q->asset->name.empty() ? "" : "(" + q->asset->name + ")");
+      return grpc::Status::OK;
+    }
+    case v1::QueryRequest::kMesh: {
+      q->seed_kind = ResolvedQuery::SeedKind::kMesh;
+      q->seeds_label = fmt::format("inline-mesh({} bytes)", r.mesh().data().size());
+      return parseMeshAsset(r.mesh().data(), r.mesh().format(), "inline mesh", "mesh", &q->asset);
+    }
+    case v1::QueryRequest::kPoints: {
+      const auto& pts = r.points().points();
+      if (pts.empty()) return invalid("points.points must hold at least one point");
+      if (pts.size() > kMaxPoints)
+        return invalid(fmt::format("points.points must hold at most {} points (got {})", kMaxPoints, pts.size()));
+      q->points.reserve(pts.size());
+      for (int i = 0; i < pts.size(); ++i) {
+        if (!finite(pts[i]))
+          return invalid(fmt::format("points.points[{}] must have finite coordinates (got {}, {}, {})", i,
+                                     pts[i].x(), pts[i].y(), pts[i].z()));
+        q->points.push_back(toVec(pts[i]));
+      }
+      q->seed_kind = ResolvedQuery::SeedKind::kPoints;
+      q->seeds_label = fmt::format("points({})", pts.size());
+      return grpc::Status::OK;
+    }
+    case v1::QueryRequest::kVolume: {
+      q->seed_kind = ResolvedQuery::SeedKind::kVolume;
+      q->seeds_label = fmt::format("inline-volume({}x{}x{})", r.volume().dims().x(), r.volume().dims().y(),
+                                   r.volume().dims().z());
+      return parseVolumeAsset(r.volume().dims(), r.volume().mask(), "inline volume", "volume",
+                              options.max_voxels_per_query, &q->asset);
+    }
+    case v1::QueryRequest::SEEDS_NOT_SET: break;
+  }
+  return invalid("seeds: exactly one of asset_id, mesh, points, volume must be set");
+}
+
+grpc::Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* grid) {
+  if (g.voxel_size() != 0 && !(std::isfinite(g.voxel_size()) && g.voxel_size() > 0))
+    return invalid(fmt::format("grid.voxel_size must be finite and > 0 when set (got {})", g.voxel_size()));
+  if (g.resolution() != 0 && (g.resolution() < 2 || g.resolution() > uint32_t(kMaxGridDim)))
+    return invalid(fmt::format("grid.resolution must be in [2, {}] when set (got {})", kMaxGridDim, g.resolution()));
+  if (g.has_padding() && g.padding() > kMaxPadding)
+    return invalid(fmt::format("grid.padding must be in [0, {}] voxels (got {})", kMaxPadding, g.padding()));
+  if (g.has_origin() && !finite(g.origin()))
+    return invalid("grid.origin must have finite coordinates");
+  const bool volume = q.seed_kind == ResolvedQuery::SeedKind::kVolume;
+
+  if (g.has_dims() || volume) {  // way a
+    if (g.has_box()) return invalid("grid.box and grid.dims are mutually exclusive");
+    if (g.resolution() != 0) return invalid("grid.resolution cannot be combined with grid.dims (give voxel_size)");
+    if (g.has_padding()) return invalid("grid.padding cannot be combined with grid.dims");
+    Coord dims;
+    if (g.has_dims()) {
+      if (std::string e = checkDims(g.dims(), "grid.dims"); !e.empty()) return invalid(e);
+      dims = {int32_t(g.dims().x()), int32_t(g.dims().y()), int32_t(g.dims().z())};
+      if (volume && !(dims == q.asset->dims))
+        return invalid(fmt::format("grid.dims ({}x{}x{}) must equal the volume's dims ({}x{}x{}) or be omitted",
+                                   dims.x, dims.y, dims.z, q.asset->dims.x, q.asset->dims.y, q.asset->dims.z));
+    } else {
+      dims = q.asset->dims;
+    }
+    double h = g.voxel_size();
+    if (h == 0) {
+      if (!volume) return invalid("grid.voxel_size must be set (> 0) when grid.dims is given");
+      h = 1;
+    }
+    *grid = Grid(g.has_origin() ? toVec(g.origin()) : Vec3d{}, h, dims);
+    return grid->validate().empty() ? grpc::Status::OK : invalid("grid: " + grid->validate());
+  }
+
+  if (g.has_origin()) return invalid("grid.origin is only used with grid.dims (the box or the seeds give it)");
+  if ((g.voxel_size() > 0) == (g.resolution() > 0))
+    return invalid("grid: give exactly one of voxel_size (> 0) and resolution (> 0)");
+  MeshGridOptions mo;
+  mo.voxel_size = g.voxel_size();
+  mo.resolution = int(g.resolution());
+  TriangleMesh point_bounds;  // gridForMesh reads only the vertices' bounds
+  const TriangleMesh* bounds = &point_bounds;
+  if (g.has_box()) {  // way b
+    if (!finite(g.box().min()) || !finite(g.box().max())) return invalid("grid.box corners must be finite");
+    mo.box_min = toVec(g.box().min());
+    mo.box_max = toVec(g.box().max());
+    const Vec3d lo = *mo.box_min, hi = *mo.box_max;
+    if (!(hi.x >= lo.x && hi.y >= lo.y && hi.z >= lo.z)) return invalid("grid.box.max must be >= grid.box.min");
+    mo.padding_voxels = g.has_padding() ? int(g.padding()) : 0;
+  } else {  // way c
+    mo.padding_voxels = g.has_padding() ? int(g.padding()) : 3;
+    if (q.seed_kind == ResolvedQuery::SeedKind::kMesh) {
+      bounds = q.asset->mesh.get();
+    } else {
+      point_bounds.vertices = q.points;
+    }
+  }
+  if (std::string e = gridForMesh(*bounds, mo, grid); !e.empty()) return invalid("grid: " + e);
+  return grpc::Status::OK;
+}
+
+}  // namespace
+
+grpc::Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, AssetCache& cache,
+                          ResolvedQuery* out) {
+  ResolvedQuery q;
+  if (grpc::Status s = resolveSeeds(r, options, cache, &q); !s.ok()) return s;
+
+  // Enumerations (proto3 enums are open: unknown numbers must be rejected, not cast).
+  switch (r.stencil()) {
+    case v1::STENCIL_UNSPECIFIED:
+    case v1::STENCIL_CUBIC26: q.stencil = v1::STENCIL_CUBIC26; q.engine.stencil = StencilKind::kCubic26; break;
+    case v1::STENCIL_CUBIC6: q.stencil = r.stencil(); q.engine.stencil = StencilKind::kCubic6; break;
+    case v1::STENCIL_CUBIC18: q.stencil = r.stencil(); q.engine.stencil = StencilKind::kCubic18; break;
+    case v1::STENCIL_FCC12: q.stencil = r.stencil(); q.engine.stencil = StencilKind::kFcc12; break;
+    default: return invalid(fmt::format("stencil must be a Stencil value 0..4 (got {})", int(r.stencil())));
+  }
+  switch (r.mode()) {
+    case v1::PROPAGATION_MODE_UNSPECIFIED:
+    case v1::PROPAGATION_MODE_EXACT: q.mode = v1::PROPAGATION_MODE_EXACT; q.engine.mode = PropagationMode::kExact; break;
+    case v1::PROPAGATION_MODE_PAPER: q.mode = r.mode(); q.engine.mode = PropagationMode::kPaper; break;
+    default: return invalid(fmt::format("mode must be a PropagationMode value 0..2 (got {})", int(r.mode())));
+  }
+  switch (r.encoding()) {
+    case v1::BRICK_ENCODING_UNSPECIFIED:
+    case v1::BRICK_ENCODING_FLOAT32: q.encoding = v1::BRICK_ENCODING_FLOAT32; break;
+    case v1::BRICK_ENCODING_FLOAT16: q.encoding = v1::BRICK_ENCODING_FLOAT16; break;
+    default: return invalid(fmt::format("encoding must be a BrickEncoding value 0..2 (got {})", int(r.encoding())));
+  }
+  const v1::SignMode sign = r.sign();
+  if (sign < v1::SIGN_MODE_UNSPECIFIED || sign > v1::SIGN_MODE_MASK_INSIDE)
+    return invalid(fmt::format("sign must be a SignMode value 0..5 (got {})", int(sign)));
+  switch (q.seed_kind) {
+    case ResolvedQuery::SeedKind::kPoints:
+      if (sign != v1::SIGN_MODE_UNSPECIFIED && sign != v1::SIGN_MODE_UNSIGNED)
+        return invalid(fmt::format("sign: point seeds only support SIGN_MODE_UNSIGNED (got {})",
+                                   v1::SignMode_Name(sign)));
+      q.sign = v1::SIGN_MODE_UNSIGNED;
+      break;
+    case ResolvedQuery::SeedKind::kVolume:
+      if (sign != v1::SIGN_MODE_UNSPECIFIED && sign != v1::SIGN_MODE_UNSIGNED && sign != v1::SIGN_MODE_MASK_INSIDE)
+        return invalid(fmt::format("sign: volume seeds support SIGN_MODE_UNSIGNED or SIGN_MODE_MASK_INSIDE (got {})",
+                                   v1::SignMode_Name(sign)));
+      q.sign = sign == v1::SIGN_MODE_UNSPECIFIED ? v1::SIGN_MODE_UNSIGNED : sign;
+      break;
+    case ResolvedQuery::SeedKind::kMesh:
+      if (sign == v1::SIGN_MODE_MASK_INSIDE)
+        return invalid("sign: SIGN_MODE_MASK_INSIDE is for volume seeds; meshes take UNSIGNED, PSEUDONORMAL, "
+                       "WINDING or PARITY");
+      q.sign = sign == v1::SIGN_MODE_UNSPECIFIED ? v1::SIGN_MODE_PSEUDONORMAL : sign;
+      break;
+  }
+
+  if (!(r.segment_length() >= 0) || !std::isfinite(r.segment_length()))
+    return invalid(fmt::format("segment_length must be finite and >= 0 (got {})", r.segment_length()));
+  if (std::isnan(r.limit()) || r.limit() < 0)
+    return invalid(fmt::format("limit must be > 0, +infinity, or 0 for no limit (got {})", r.limit()));
+  q.engine.segment_length_world = r.segment_length();
+  q.engine.limit_world = r.limit() == 0 ? std::numeric_limits<double>::infinity() : r.limit();
+
+  q.batch_bytes = r.max_batch_bytes() == 0
+                      ? options.batch_bytes
+                      : std::clamp<uint32_t>(r.max_batch_bytes(), 64u << 10, options.max_message_bytes);
+
+  if (!r.has_grid()) return invalid("grid must be set (voxel_size or resolution, or dims)");
+  if (grpc::Status s = resolveGrid(r.grid(), q, &q.grid); !s.ok()) return s;
+  const uint64_t voxels = uint64_t(q.grid.voxelCount());
+  if (voxels > options.max_voxels_per_query)
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+            fmt::format("grid: {}x{}x{} = {} voxels exceeds the server's voxel budget of {} per query",
+                        q.grid.dims().x, q.grid.dims().y, q.grid.dims().z, voxels, options.max_voxels_per_query)};
+  if (std::string e = validateOptions(q.grid, q.engine); !e.empty()) return invalid(e);
+  // Without a limit the engine's own segment-count rule does not apply: bound it by the grid's diagonal, the
+  // largest distance a voxel can have, so a tiny segment length cannot request millions of empty segments.
+  if (q.engine.segment_length_world > 0) {
+    const Coord d = q.grid.dims();
+    const double diagonal = q.grid.voxelSize() * std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z);
+    const double span = std::min(q.engine.limit_world, diagonal);
+    if (span / q.engine.segment_length_world > kMaxSegments)
+      return invalid(fmt::format("segment_length {} would cut min(limit, grid diagonal) = {} into more than {} "
+                                 "segments; use a longer segment_length",
+                                 q.engine.segment_length_world, span, kMaxSegments));
+  }
+  *out = std::move(q);
+  return grpc::Status::OK;
+}
+
+void fillQueryHeader(const ResolvedQuery& q, const std::string& query_id, v1::QueryHeader* h) {
+  h->mutable_origin()->set_x(q.grid.origin().x);
+  h->mutable_origin()->set_y(q.grid.origin().y);
+  h->mutable_origin()->set_z(q.grid.origin().z);
+  h->set_voxel_size(q.grid.voxelSize());
+  h->mutable_dims()->set_x(q.grid.dims().x);
+  h->mutable_dims()->set_y(q.grid.dims().y);
+  h->mutable_dims()->set_z(q.grid.dims().z);
+  h->set_limit(q.engine.limit_world);
+  h->set_signed_(q.signedField());
+  h->set_encoding(q.encoding);
+  h->set_stencil(q.stencil);
+  h->set_mode(q.mode);
+  h->set_sign(q.sign);
+  h->set_segment_length(q.engine.segment_length_world);
+  h->set_query_id(query_id);
+}
+
+}  // namespace distband

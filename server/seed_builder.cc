@@ -1,0 +1,31 @@
+#include "server/seed_builder.h"
+
+#include "core/seeds/mesh_seeds.h"
+#include "core/seeds/point_seeds.h"
+#include "core/seeds/volume_seeds.h"
+
+namespace distband {
+
+std::string buildSeeds(const ResolvedQuery& q, Seeds* seeds) {
+  switch (q.seed_kind) {
+    case ResolvedQuery::SeedKind::kPoints:
+      return makePointSeeds(q.grid, q.points, seeds);
+    case ResolvedQuery::SeedKind::kVolume:
+      return makeVolumeSeeds(q.grid, *q.asset->mask, q.sign == v1::SIGN_MODE_MASK_INSIDE, seeds);
+    case ResolvedQuery::SeedKind::kMesh: {
+      MeshSeedOptions o;
+      o.mode = q.mode == v1::PROPAGATION_MODE_PAPER ? MeshSiteMode::kPaper : MeshSiteMode::kExactFeature;
+      switch (q.sign) {
+        case v1::SIGN_MODE_UNSIGNED: o.sign = SignMethod::kUnsigned; break;
+        case v1::SIGN_MODE_WINDING: o.sign = SignMethod::kWinding; break;
+        case v1::SIGN_MODE_PARITY: o.sign = SignMethod::kParity; break;
+        default: o.sign = SignMethod::kPseudonormal; break;
+      }
+      o.limit_voxels = q.engine.limit_world / q.grid.voxelSize();
+      return makeMeshSeeds(q.grid, *q.asset->mesh, o, seeds);
+    }
+  }
+  return "unknown seed kind";
+}
+
+}  // namespace distband

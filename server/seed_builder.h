@@ -1,0 +1,16 @@
+// Seed building: the Seeds of a resolved query (point, volume or mesh source on the query's grid).
+// Contract: compute work — call it on the compute thread inside the shared arena (mesh seeds use TBB).
+// Returns "" or the seed source's error (e.g. a volume with no outside voxel for a signed field), which the
+// caller reports as INVALID_ARGUMENT. `seconds` receives the elapsed time. Thread-safe.
+#pragma once
+
+#include <string>
+
+#include "core/seeds.h"
+#include "server/request_validation.h"
+
+namespace distband {
+
+std::string buildSeeds(const ResolvedQuery& query, Seeds* seeds);
+
+}  // namespace distband

@@ -1,0 +1,198 @@
+// Tests for `distband compute` (client/compute_command, client/cli): runs the command in-process on tiny inputs,
+// checks the written .npy against the expected distances, the limit/sign background, the log, and exit code 2
+// with a clear message for every kind of bad flag or input file.
+#include "client/compute_command.h"
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "client/cli.h"
+#include "core/io/npy.h"
+
+namespace distband {
+namespace {
+
+struct CliResult {
+  int code;
+  std::string out, err;
+};
+
+CliResult run(const std::vector<std::string>& args, std::function<bool()> interrupted = {}) {
+  std::ostringstream out, err;
+  const CliContext ctx{out, err, std::move(interrupted)};
+  const int code = runDistband(args, ctx);
+  return {code, out.str(), err.str()};
+}
+
+std::string tmp(const std::string& name) { return ::testing::TempDir() + "compute_test_" + name; }
+
+TEST(ComputeCommandTest, PointsToNpy) {
+  const std::string out = tmp("points.npy");
+  std::remove(out.c_str());
+  const CliResult r = run({"compute", "--points", "2.5,3,4; 12,12,12", "--dims", "16,14,12", "--voxel-size", "0.5",
+                           "--origin", "-1,0,1", "--stencil", "fcc12", "--segment", "1.5", "--threads", "2",
+                           "--out", out});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("segment   0"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("done:"), std::string::npos) << r.out;
+  std::vector<float> v;
+  Coord d;
+  ASSERT_EQ(readNpyFloat32(out, &v, &d), "");
+  EXPECT_EQ(d, (Coord{16, 14, 12}));
+  // Exact mode is the default: compare with the analytic distance to the nearer point.
+  double max_err = 0;
+  for (int z = 0; z < 12; ++z)
+    for (int y = 0; y < 14; ++y)
+      for (int x = 0; x < 16; ++x) {
+        const double wx = -1 + 0.5 * x, wy = 0.5 * y, wz = 1 + 0.5 * z;
+        const double d1 = std::sqrt((wx - 2.5) * (wx - 2.5) + (wy - 3) * (wy - 3) + (wz - 4) * (wz - 4));
+        const double d2 = std::sqrt((wx - 12) * (wx - 12) + (wy - 12) * (wy - 12) + (wz - 12) * (wz - 12));
+        max_err = std::max(max_err, std::fabs(v[(z * 14 + y) * 16 + x] - std::min(d1, d2)));
+      }
+  EXPECT_LT(max_err, 1e-5);
+  std::remove(out.c_str());
+}
+
+TEST(ComputeCommandTest, LimitBackgroundAndSignedVolume) {
+  const Coord dims{20, 18, 16};
+  std::vector<uint8_t> mask(size_t(dims.x) * dims.y * dims.z, 0);
+  for (int z = 3; z <= 12; ++z)
+    for (int y = 3; y <= 14; ++y)
+      for (int x = 3; x <= 16; ++x) mask[(size_t(z) * dims.y + y) * dims.x + x] = 1;
+  const std::string in = tmp("box.npy"), out = tmp("box_field.npy"), meta = tmp("box_field.json");
+  ASSERT_EQ(writeNpyMask(in, mask, dims), "");
+  const CliResult r = run({"compute", "--volume", in, "--signed", "--limit", "2", "--segment", "1", "--out", out,
+                           "--meta", meta});
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::vector<float> v;
+  Coord d;
+  ASSERT_EQ(readNpyFloat32(out, &v, &d), "");
+  ASSERT_EQ(d, dims);
+  auto at = [&](int x, int y, int z) { return v[(size_t(z) * dims.y + y) * dims.x + x]; };
+  EXPECT_EQ(at(0, 0, 0), 2.0f);     // outside, beyond the limit: +limit
+  EXPECT_EQ(at(9, 9, 8), -2.0f);    // deep inside, beyond the limit: -limit
+  EXPECT_EQ(at(3, 9, 8), -1.0f);    // inside, next to the boundary
+  EXPECT_EQ(at(2, 9, 8), 1.0f);     // outside, next to the boundary
+  EXPECT_EQ(at(1, 9, 8), 2.0f);     // outside, distance 2 = limit: delivered, equal to the background anyway
+  EXPECT_EQ(at(4, 4, 8), -2.0f);    // inside, distance 2
+  EXPECT_FLOAT_EQ(at(2, 2, 8), std::sqrt(2.0f));
+  std::ifstream j(meta);
+  const std::string json((std::istreambuf_iterator<char>(j)), {});
+  EXPECT_NE(json.find("\"signed\": true"), std::string::npos) << json;
+  EXPECT_NE(json.find("\"limit\": 2.0"), std::string::npos) << json;
+  std::remove(in.c_str());
+  std::remove(out.c_str());
+  std::remove(meta.c_str());
+}
+
+TEST(ComputeCommandTest, HelpExitsZero) {
+  const CliResult r = run({"compute", "--help"});
+  EXPECT_EQ(r.code, 0);
+  EXPECT_NE(r.out.find("--volume"), std::string::npos) << r.out;
+  const CliResult top = run({"--help"});
+  EXPECT_EQ(top.code, 0);
+  EXPECT_NE(top.out.find("compute"), std::string::npos);
+}
+
+TEST(ComputeCommandTest, UsageAndInputErrorsExitTwo) {
+  const std::string good_mask = tmp("good.npy");
+  ASSERT_EQ(writeNpyMask(good_mask, std::vector<uint8_t>(64, 1), {4, 4, 4}), "");
+  const std::string text_file = tmp("text.npy");
+  std::ofstream(text_file) << "not a numpy file\n";
+  const std::string empty_mask = tmp("empty.npy");
+  ASSERT_EQ(writeNpyMask(empty_mask, std::vector<uint8_t>(64, 0), {4, 4, 4}), "");
+  const std::string out = tmp("never.npy");
+  const std::vector<std::string> pts = {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", out};
+  auto with = [&](std::vector<std::string> extra, std::vector<std::string> base) {
+    base.insert(base.end(), extra.begin(), extra.end());
+    return base;
+  };
+  struct Case {
+    std::string name;
+    std::vector<std::string> args;
+    std::string expect;  ///< substring of stderr
+  };
+  const std::vector<Case> cases = {
+      {"no_command", {}, "subcommand"},
+      {"unknown_command", {"frobnicate"}, "frobnicate"},
+      {"unknown_flag", with({"--bogus"}, pts), "--bogus"},
+      {"missing_out", {"compute", "--points", "1,1,1", "--dims", "8,8,8"}, "--out"},
+      {"no_seeds", {"compute", "--dims", "8,8,8", "--out", out}, "exactly one seed source"},
+      {"both_seeds", with({"--volume", good_mask}, pts), "excludes"},
+      {"signed_points", with({"--signed"}, pts), "--signed"},
+      {"points_without_dims", {"compute", "--points", "1,1,1", "--out", out}, "--dims"},
+      {"dims_two", {"compute", "--points", "1,1,1", "--dims", "8,8", "--out", out}, "three comma-separated"},
+      {"dims_zero", {"compute", "--points", "1,1,1", "--dims", "0,8,8", "--out", out}, "[1, 16384]"},
+      {"dims_huge", {"compute", "--points", "1,1,1", "--dims", "8,99999,8", "--out", out}, "[1, 16384]"},
+      {"dims_text", {"compute", "--points", "1,1,1", "--dims", "a,b,c", "--out", out}, "not an integer"},
+      {"bad_point", {"compute", "--points", "1,1,1;2,x,2", "--dims", "8,8,8", "--out", out}, "point 2"},
+      {"short_point", {"compute", "--points", "1,1", "--dims", "8,8,8", "--out", out}, "three comma-separated"},
+      {"nan_point", {"compute", "--points", "1,nan,1", "--dims", "8,8,8", "--out", out}, "not a finite number"},
+      {"empty_points", {"compute", "--points", ";", "--dims", "8,8,8", "--out", out}, "no point"},
+      {"bad_origin", with({"--origin", "1,2"}, pts), "--origin"},
+      {"missing_volume", {"compute", "--volume", tmp("nope.npy"), "--out", out}, "cannot open"},
+      {"malformed_volume", {"compute", "--volume", text_file, "--out", out}, "not a .npy file"},
+      {"empty_volume", {"compute", "--volume", empty_mask, "--out", out}, "no nonzero voxel"},
+      {"signed_full_volume", {"compute", "--volume", good_mask, "--signed", "--out", out}, "no zero voxel"},
+      {"dims_mismatch", {"compute", "--volume", good_mask, "--dims", "4,4,5", "--out", out}, "disagrees"},
+      {"bad_stencil", with({"--stencil", "cubic27"}, pts), "--stencil 'cubic27'"},
+      {"bad_mode", with({"--mode", "fast"}, pts), "--mode 'fast'"},
+      {"negative_limit", with({"--limit", "-1"}, pts), "--limit"},
+      {"zero_limit", with({"--limit", "0"}, pts), "--limit"},
+      {"text_limit", with({"--limit", "far"}, pts), "--limit"},
+      {"negative_segment", with({"--segment", "-2"}, pts), "--segment"},
+      {"negative_threads", with({"--threads", "-1"}, pts), "--threads"},
+      {"zero_voxel_size", with({"--voxel-size", "0"}, pts), "--voxel-size"},
+      {"unsupported_out", {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", tmp("f.txt")},
+       "unsupported output format"},
+      {"unwritable_out", {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", "/nonexistent/d/f.npy"},
+       "does not exist"},
+  };
+  for (const Case& c : cases) {
+    const CliResult r = run(c.args);
+    EXPECT_EQ(r.code, 2) << c.name << "\nstdout: " << r.out << "\nstderr: " << r.err;
+    EXPECT_NE(r.err.find(c.expect), std::string::npos) << c.name << ": stderr was: " << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out)) << c.name << ": nothing may be written on error";
+  }
+  std::remove(good_mask.c_str());
+  std::remove(text_file.c_str());
+  std::remove(empty_mask.c_str());
+}
+
+TEST(ComputeCommandTest, InterruptedRunWritesNothing) {
+  const std::string out = tmp("interrupted.npy");
+  std::remove(out.c_str());
+  const CliResult r =
+      run({"compute", "--points", "1,1,1", "--dims", "32,32,32", "--segment", "2", "--out", out}, [] { return true; });
+  EXPECT_EQ(r.code, 130) << r.err;
+  EXPECT_NE(r.err.find("interrupted"), std::string::npos);
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+TEST(ComputeCommandTest, ListParsers) {
+  Vec3d v;
+  EXPECT_EQ(parseVec3(" 1.5, -2,3e1 ", "--origin", &v), "");
+  EXPECT_EQ(v, (Vec3d{1.5, -2, 30}));
+  EXPECT_NE(parseVec3("1,2,3,4", "--origin", &v), "");
+  EXPECT_NE(parseVec3("1,,3", "--origin", &v), "");
+  EXPECT_NE(parseVec3("1,inf,3", "--origin", &v), "");
+  Coord c;
+  EXPECT_EQ(parseDims("256, 128,64", &c), "");
+  EXPECT_EQ(c, (Coord{256, 128, 64}));
+  EXPECT_NE(parseDims("256,128,64.5", &c), "");
+  EXPECT_NE(parseDims("-1,2,3", &c), "");
+  std::vector<Vec3d> pts;
+  EXPECT_EQ(parsePointList("1,2,3;4,5,6;", &pts), "");
+  ASSERT_EQ(pts.size(), 2u);
+  EXPECT_EQ(pts[1], (Vec3d{4, 5, 6}));
+}
+
+}  // namespace
+}  // namespace distband

@@ -1,0 +1,165 @@
+// The `distband query` command against a real in-process server: the .vdb it writes reads back with OpenVDB as a
+// level set whose values equal the in-process engine's, the .npy matches, and failures map to exit codes without
+// leaving files behind.
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
+
+#include "client/cli.h"
+#include "core/dense_field.h"
+#include "core/engine.h"
+#include "core/io/npy.h"
+#include "core/mesh/mesh_grid.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/seeds/mesh_seeds.h"
+#include "server/server.h"
+
+namespace distband {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Fixture {
+  Fixture() {
+    ServerOptions o;
+    o.listen_address = "127.0.0.1:0";
+    o.compute_threads = 2;
+    server = std::make_unique<DistbandServer>(o);
+    EXPECT_TRUE(server->start().ok());
+    address = "127.0.0.1:" + std::to_string(server->port());
+    dir = fs::temp_directory_path() / ("distband_remote_cli_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    std::ofstream(dir / "cube.obj") << "v -1 -1 -1\nv 1 -1 -1\nv -1 1 -1\nv 1 1 -1\nv -1 -1 1\nv 1 -1 1\nv -1 1 1\n"
+                                       "v 1 1 1\nf 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n";
+  }
+  ~Fixture() { fs::remove_all(dir); }
+  int run(std::vector<std::string> args, bool interrupt = false) {
+    out.str("");
+    err.str("");
+    CliContext ctx{out, err, [interrupt] { return interrupt; }};
+    return runDistband(args, ctx);
+  }
+  std::string path(const char* name) const { return (dir / name).string(); }
+
+  std::unique_ptr<DistbandServer> server;
+  std::string address;
+  fs::path dir;
+  std::ostringstream out, err;
+};
+
+TEST(RemoteCliTest, QueryWritesALevelSetVdbThatMatchesTheEngine) {
+  Fixture f;
+  const double limit = 0.3;
+  const int code = f.run({"query", "--server", f.address, "--mesh", f.path("cube.obj"), "--resolution", "40",
+                          "--limit", "0.3", "--segment", "0.1", "--out", f.path("cube.vdb"), "--npy",
+                          f.path("cube.npy"), "--slice-png", "z:mid", f.path("cube.png"), "--isosurface", "0",
+                          f.path("cube.obj.out.obj"), "--progress", "quiet"});
+  ASSERT_EQ(code, 0) << f.err.str() << f.out.str();
+  EXPECT_TRUE(fs::exists(f.path("cube.png")));
+  EXPECT_TRUE(fs::exists(f.path("cube.obj.out.obj")));
+
+  // In-process reference on the same grid.
+  TriangleMesh mesh;
+  ASSERT_EQ(loadMesh(f.path("cube.obj"), &mesh, nullptr), "");
+  MeshGridOptions mo;
+  mo.resolution = 40;
+  Grid grid;
+  ASSERT_EQ(gridForMesh(mesh, mo, &grid), "");
+  MeshSeedOptions so;
+  so.limit_voxels = limit / grid.voxelSize();
+  Seeds seeds;
+  ASSERT_EQ(makeMeshSeeds(grid, mesh, so, &seeds), "");
+  EngineOptions eo;
+  eo.limit_world = limit;
+  eo.segment_length_world = 0.1;
+  DenseField ref(grid, float(limit));
+  std::vector<uint8_t> delivered(size_t(grid.voxelCount()), 0);
+  computeDistanceField(grid, seeds, eo, [&](SegmentBricks&& s) {
+    ref.add(s);
+    for (const Brick& b : s.bricks)
+      for (int i = 0; i < kBrickVoxels; ++i)
+        if (b.mask.test(i) && grid.contains(b.origin + brickLocal(i)))
+          delivered[size_t(grid.denseIndex(b.origin + brickLocal(i)))] = 1;
+  });
+
+  openvdb::initialize();
+  openvdb::io::File file(f.path("cube.vdb"));
+  file.open();
+  auto base = file.readGrid("distance");
+  file.close();
+  auto vdb = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
+  ASSERT_TRUE(vdb);
+  EXPECT_EQ(vdb->getGridClass(), openvdb::GRID_LEVEL_SET);
+  EXPECT_FLOAT_EQ(vdb->background(), float(limit));
+  EXPECT_NEAR(vdb->voxelSize()[0], grid.voxelSize(), 1e-12);
+  const openvdb::Vec3d o = vdb->indexToWorld(openvdb::Coord(0, 0, 0));
+  EXPECT_NEAR(o[0], grid.origin().x, 1e-9);
+  EXPECT_NEAR(o[1], grid.origin().y, 1e-9);
+  EXPECT_NEAR(o[2], grid.origin().z, 1e-9);
+  auto acc = vdb->getConstAccessor();
+  int64_t active = 0, mismatches = 0;
+  for (int z = 0; z < grid.dims().z; ++z)
+    for (int y = 0; y < grid.dims().y; ++y)
+      for (int x = 0; x < grid.dims().x; ++x) {
+        const Coord c{x, y, z};
+        if (!delivered[size_t(grid.denseIndex(c))]) continue;
+        ++active;
+        mismatches += acc.getValue(openvdb::Coord(x, y, z)) != ref.at(c);
+      }
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_EQ(int64_t(vdb->activeVoxelCount()), active);
+  // The cube's centre is beyond the limit inside: the flood fill makes it -limit.
+  const Vec3d centre = grid.indexOf({0, 0, 0});
+  EXPECT_FLOAT_EQ(acc.getValue(openvdb::Coord(int(std::lround(centre.x)), int(std::lround(centre.y)),
+                                              int(std::lround(centre.z)))),
+                  -float(limit));
+
+  std::vector<float> npy;
+  Coord dims;
+  ASSERT_EQ(readNpyFloat32(f.path("cube.npy"), &npy, &dims), "");
+  ASSERT_EQ(dims, grid.dims());
+  int64_t npy_mismatches = 0;
+  for (size_t i = 0; i < npy.size(); ++i) npy_mismatches += delivered[i] && npy[i] != ref.values()[i];
+  EXPECT_EQ(npy_mismatches, 0);
+}
+
+TEST(RemoteCliTest, ServerRejectionIsAUsageErrorAndWritesNothing) {
+  Fixture f;
+  EXPECT_EQ(f.run({"query", "--server", f.address, "--mesh", f.path("cube.obj"), "--resolution", "1", "--limit",
+                   "0.3", "--out", f.path("bad.vdb"), "--progress", "quiet"}),
+            2);
+  EXPECT_NE(f.err.str().find("grid.resolution"), std::string::npos) << f.err.str();
+  EXPECT_FALSE(fs::exists(f.path("bad.vdb")));
+  // A .vdb needs a finite limit: refused before contacting the server.
+  EXPECT_EQ(f.run({"query", "--server", f.address, "--points", "1,2,3", "--dims", "8,8,8", "--voxel-size", "1",
+                   "--out", f.path("nolimit.vdb")}),
+            2);
+}
+
+TEST(RemoteCliTest, InterruptCancelsTheQueryAndWritesNothing) {
+  Fixture f;
+  const int code = f.run({"query", "--server", f.address, "--points", "1,2,3", "--dims", "256,256,256",
+                          "--voxel-size", "1", "--segment", "1", "--limit", "200", "--out", f.path("never.vdb"),
+                          "--progress", "quiet"},
+                         /*interrupt=*/true);
+  EXPECT_EQ(code, 130) << f.err.str();
+  EXPECT_FALSE(fs::exists(f.path("never.vdb")));
+}
+
+TEST(RemoteCliTest, UploadInfoHealth) {
+  Fixture f;
+  ASSERT_EQ(f.run({"upload", "--server", f.address, "--mesh", f.path("cube.obj")}), 0) << f.err.str();
+  EXPECT_EQ(f.out.str().rfind("mesh-", 0), 0u) << f.out.str();
+  ASSERT_EQ(f.run({"info", "--server", f.address}), 0) << f.err.str();
+  EXPECT_NE(f.out.str().find("compute threads    2"), std::string::npos) << f.out.str();
+  ASSERT_EQ(f.run({"health", "--server", f.address}), 0) << f.err.str();
+  EXPECT_EQ(f.out.str(), "SERVING\n");
+  EXPECT_EQ(f.run({"upload", "--server", f.address, "--mesh", f.path("missing.obj")}), 2);
+}
+
+}  // namespace
+}  // namespace distband
