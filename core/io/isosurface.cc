@@ -12,6 +12,8 @@
 #include <string_view>
 
 #include <fmt/format.h>
+
+#include "core/io/temp_file.h"
 #include <openvdb/tools/VolumeToMesh.h>
 
 namespace distband {
@@ -71,16 +73,9 @@ std::string writeObj(const std::string& path, const TriangleMeshF& mesh, const s
       if (v >= mesh.vertices.size())
         return fmt::format("OBJ: triangle refers to vertex {} of {}", v, mesh.vertices.size());
 
-  std::string tmp = path + ".tmp-XXXXXX";
-  const int fd = mkstemp(tmp.data());
-  if (fd < 0) return fmt::format("cannot create a temporary file next to '{}': {}", path, std::strerror(errno));
-  std::FILE* file = fdopen(fd, "w");
-  if (!file) {
-    const std::string err = std::strerror(errno);
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    return fmt::format("cannot open '{}': {}", tmp, err);
-  }
+  std::string tmp;
+  std::FILE* file = nullptr;
+  if (std::string err = openTempBeside(path, "w", &tmp, &file); !err.empty()) return err;
   // Format in chunks: far faster than one stdio call per number for million-triangle meshes.
   fmt::memory_buffer buf;
   bool ok = true;

@@ -16,6 +16,8 @@
 
 #include <fmt/format.h>
 
+#include "core/io/temp_file.h"
+
 namespace distband {
 namespace {
 
@@ -76,16 +78,9 @@ std::string writePngAtomically(const std::string& path, int width, int height, s
   std::vector<png_bytep> rows(static_cast<size_t>(height));
   for (int r = 0; r < height; ++r) rows[size_t(r)] = pixels.data() + size_t(r) * size_t(width) * 3;
 
-  std::string tmp = path + ".tmp-XXXXXX";
-  const int fd = mkstemp(tmp.data());
-  if (fd < 0) return fmt::format("cannot create a temporary file next to '{}': {}", path, std::strerror(errno));
-  std::FILE* file = fdopen(fd, "wb");
-  if (!file) {
-    const std::string err = std::strerror(errno);
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    return fmt::format("cannot open '{}': {}", tmp, err);
-  }
+  std::string tmp;
+  std::FILE* file = nullptr;
+  if (std::string err = openTempBeside(path, "wb", &tmp, &file); !err.empty()) return err;
   std::string err = encodePng(file, width, height, rows.data());
   if (std::fflush(file) != 0 && err.empty()) err = fmt::format("cannot write '{}': {}", tmp, std::strerror(errno));
   if (err.empty() && ::fsync(fileno(file)) != 0)
