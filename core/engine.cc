@@ -92,9 +92,11 @@ inline uint32_t toKeySite(uint32_t site) { return site == kNoSite ? kNoSiteKey :
 constexpr uint32_t kOutsideGrid = ~uint32_t(0);
 constexpr uint16_t kNeverExpires = 0xFFFF;
 constexpr int kMaxSteps = 65000;  // expiry holds 16-bit step numbers
-// Offers are admitted this many voxels beyond the segment threshold (and the limit), while only voxels within the
-// threshold are frozen and delivered: a closest site whose path briefly runs outside the threshold still arrives.
+// Offers are admitted this many voxels beyond a segment's threshold, while only voxels within the threshold are
+// frozen and delivered: a closest site whose path briefly runs outside the threshold still arrives. At the limit the
+// slack is smaller: it is paid in work and memory on every query, and nothing beyond the limit is delivered.
 constexpr double kAdmitSlackVoxels = 2.0;
+constexpr double kLimitSlackVoxels = 1.0;
 constexpr uint8_t kEmitted = 2;
 constexpr uint8_t kDirty = 4;   // changed since the last correction round (listed in ThreadBuffers::dirty)
 constexpr uint8_t kQueued = 8;  // already a candidate of the current correction round
@@ -440,7 +442,7 @@ void BandRun::insertBand() {
   const auto& band = seeds_.band;
   if (seeds_.siteCount() >= kMaxSites)
     throw std::invalid_argument(fmt::format("too many sites ({}; at most {})", seeds_.siteCount(), kMaxSites - 1));
-  const double admit_limit = limit_vox_ + kAdmitSlackVoxels;
+  const double admit_limit = limit_vox_ + kLimitSlackVoxels;
   const float limit2 = std::isfinite(admit_limit) ? float(admit_limit * admit_limit) : INFINITY;
   for (const BandVoxel& v : band) {
     if (!grid_.contains(v.voxel))
@@ -845,7 +847,8 @@ EngineResult BandRun::run() {
     stats.upper_world = upper * grid_.voxelSize();
     thr_is_limit_ = upper >= limit_vox_;
     thr2_ = std::isfinite(upper) ? float(upper * upper) : INFINITY;
-    admit2_ = std::isfinite(upper) ? float((upper + kAdmitSlackVoxels) * (upper + kAdmitSlackVoxels)) : INFINITY;
+    const double slack = thr_is_limit_ ? kLimitSlackVoxels : kAdmitSlackVoxels;
+    admit2_ = std::isfinite(upper) ? float((upper + slack) * (upper + slack)) : INFINITY;
     segment_start_step_ = step_;
     lower_vox_ = lower;
     if (seg > 0 && use_lifespan_) rearmLifespans();
