@@ -193,9 +193,13 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   options.stencil = *stencil;
   if (a.mesh.empty() && !parseMode(a.mode, &options.mode))
     return usage(fmt::format("--mode '{}': expected exact or paper", a.mode));
-  // Meshes: the site mode picks what propagates; the engine runs its lifespan band (the second-ring correction
-  // costs ~4x on triangle sites for ~0.01 voxel, so it is opt-in).
-  if (!a.mesh.empty()) options.mode = a.second_ring ? PropagationMode::kExact : PropagationMode::kPaper;
+  // Meshes: exact-feature propagates closest triangles to convergence; paper propagates closest points with the
+  // paper's lifespan band. The second-ring correction costs several times the propagation on triangle sites for
+  // ~0.01 voxel, so it is opt-in (--second-ring).
+  if (!a.mesh.empty()) {
+    options.mode = a.mode == "paper" ? PropagationMode::kPaper : PropagationMode::kExact;
+    options.second_ring = a.second_ring;
+  }
   options.segment_length_world = a.segment;
   options.limit_world = a.limit;
   options.threads = a.threads;

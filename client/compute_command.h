@@ -9,8 +9,9 @@
 //     a list of world-space points with --dims, or a triangle mesh (OBJ/OFF/PLY/STL) whose grid comes from
 //     --resolution (voxels along the longest padded side) or --voxel-size. Mesh modes: exact-feature (default,
 //     "exact" is an alias: closest-triangle propagation) or paper (closest-point propagation); --sign picks
-//     pseudonormal (default), winding, parity or unsigned; --second-ring adds the engine's correction. Distances are world units (voxel size H, origin = world
-//     position of voxel (0,0,0)); --signed makes mask voxels negative (OpenVDB's convention).
+//     pseudonormal (default), winding, parity or unsigned; --second-ring adds the engine's correction.
+//   * Distances are world units (voxel size H, origin = world position of voxel (0,0,0)); --signed makes mask
+//     voxels negative (OpenVDB's convention).
 //   * Voxels beyond --limit hold +limit (-limit inside a signed mask). Logs one line per finished segment
 //     (index, |distance| range, voxels, bricks, seconds) and a summary to `out`; errors go to `err`.
 //   * Exit codes (client/command.h): 2 for usage/input errors (bad flags, unreadable or malformed files, bad
@@ -38,7 +39,7 @@ struct ComputeArgs {
   int resolution = 0;            ///< mesh: voxels along the longest side of the padded box (the paper's N)
   int padding = 3;               ///< mesh: margin in voxels on every side
   std::string sign = "pseudonormal";  ///< mesh: pseudonormal | winding | parity | unsigned
-  bool second_ring = false;      ///< mesh: run the engine's exact mode (second-ring correction) too
+  bool second_ring = false;      ///< mesh: also run the engine's second-ring correction
   std::string origin = "0,0,0";
   std::string stencil = "cubic26";
   std::string mode = "exact";
