@@ -1,0 +1,600 @@
+// mesh_bench: the mesh benchmark of issue 3 — the SMI 2009 paper's Table 1 mesh rows (paper vs exact-feature
+// modes, with and without segments), its Fig. 6 (time per distance range) and Fig. 7 (l_seg sweep), and, in the
+// same run, OpenVDB's tools::meshToSignedDistanceField on the same mesh, transform and band.
+//
+// Contract:
+//   * Default (no --case): runs the suites named by --suite (table1, openvdb, fig7, memory; default all but
+//     memory) in this process with one TBB thread budget (--threads, via tbb::global_control; the engine also
+//     runs in a task_arena of that size), and writes <out-dir>/<tag>.json and <tag>.md.
+//   * Timed region, distband: makeMeshSeeds + computeDistanceField (sign included). In the openvdb suite the
+//     timed region also assembles the delivered bricks into an OpenVDB FloatGrid (VdbFieldBuilder + signed
+//     flood fill), the same product OpenVDB's call returns; the engine-only time is reported beside it.
+//     Timed region, OpenVDB: meshToSignedDistanceField (float points and indices prepared before the clock).
+//   * Errors are in voxels against brute force (tests/support/brute_mesh: exact point–triangle distance over all
+//     triangles, sign from the exact generalized winding number), on --samples voxels: for table1 drawn
+//     uniformly from the whole grid, for openvdb uniformly from the band distband delivered (OpenVDB's value at
+//     the same voxel; voxels OpenVDB left inactive are counted as missing, not as errors).
+//   * --case memory-distband | memory-distband-discard | memory-seeds | memory-openvdb: one memory row (default armadillo at 1024^3, half-width 3) in
+//     this process, one JSON line on stdout; the memory suite runs both as child processes under
+//     /usr/bin/time -v and reads their "Maximum resident set size".
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <functional>
+#include <random>
+#include <sstream>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/MeshToVolume.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include "core/engine.h"
+#include "core/io/vdb_writer.h"
+#include "core/mesh/mesh_grid.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/seeds/mesh_seeds.h"
+#include "tests/support/brute_mesh.h"
+
+#ifndef DISTBAND_BENCH_DIR
+#define DISTBAND_BENCH_DIR "bench"
+#endif
+
+namespace distband {
+namespace {
+
+using json = nlohmann::json;
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+double peakRssMb() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return ru.ru_maxrss / 1024.0;
+}
+
+struct Options {
+  std::string mesh_dir = "/work/shared/data/meshes";
+  std::string out_dir = DISTBAND_BENCH_DIR "/results";
+  std::string tag = "mesh_bench";
+  std::vector<std::string> suites = {"table1", "openvdb", "fig7"};
+  std::vector<std::string> table1_meshes = {"fandisk.off", "bunny.obj", "armadillo.off", "teapot.obj"};
+  std::vector<std::string> openvdb_meshes = {"armadillo.off", "bunny.obj", "fandisk.off", "teapot.obj"};
+  std::vector<int> resolutions = {64, 128, 256};
+  int openvdb_resolution = 256;
+  std::vector<int> half_widths = {3, 20, 60};
+  int threads = 2;
+  int samples = 2000;
+  int padding = 3;
+  double segment = 20;
+  std::string stencil = "cubic26";
+  std::string run_case;
+  PropagationMode feature_engine = PropagationMode::kExact;  ///< engine mode of the exact-feature rows
+  std::string memory_mesh = "armadillo.off";
+  int memory_resolution = 1024;
+  int memory_half_width = 3;
+};
+
+struct MeshInput {
+  std::string name;
+  TriangleMesh mesh;
+  MeshReport report;
+};
+
+MeshInput loadInput(const Options& o, const std::string& file) {
+  MeshInput in;
+  in.name = std::filesystem::path(file).stem().string();
+  const std::string error = loadMesh(o.mesh_dir + "/" + file, &in.mesh, &in.report);
+  if (!error.empty()) throw std::runtime_error(error);
+  return in;
+}
+
+Grid gridFor(const TriangleMesh& mesh, int resolution, int padding) {
+  Grid g;
+  MeshGridOptions go;
+  go.resolution = resolution;
+  go.padding_voxels = padding;
+  if (std::string e = gridForMesh(mesh, go, &g); !e.empty()) throw std::runtime_error(e);
+  return g;
+}
+
+// Brute-force signed reference at sample voxels (world units), in parallel.
+struct Reference {
+  std::vector<Coord> voxels;
+  std::vector<double> distance;  // unsigned
+  std::vector<uint8_t> inside;   // winding number > 0.5
+};
+Reference reference(const TriangleMesh& mesh, const Grid& grid, std::vector<Coord> voxels) {
+  Reference r;
+  r.voxels = std::move(voxels);
+  r.distance.resize(r.voxels.size());
+  r.inside.resize(r.voxels.size());
+  tbb::parallel_for(size_t(0), r.voxels.size(), [&](size_t i) {
+    const Vec3d w = grid.worldOf(r.voxels[i]);
+    r.distance[i] = testing::bruteDistance(mesh, w);
+    r.inside[i] = testing::bruteWinding(mesh, w) > 0.5;
+  });
+  return r;
+}
+
+struct ErrorStats {
+  double max_err = 0, mean_err = 0;
+  int64_t sign_errors = 0, missing = 0, compared = 0;
+  json toJson() const {
+    return {{"max_err_vox", max_err}, {"mean_err_vox", mean_err}, {"sign_errors", sign_errors},
+            {"missing", missing}, {"compared", compared}};
+  }
+};
+// values[i] is NaN where the method has no value (not delivered / inactive).
+ErrorStats compare(const Reference& ref, const std::vector<float>& values, double h) {
+  ErrorStats s;
+  double sum = 0;
+  for (size_t i = 0; i < ref.voxels.size(); ++i) {
+    if (std::isnan(values[i])) {
+      ++s.missing;
+      continue;
+    }
+    const double err = std::abs(std::abs(double(values[i])) - ref.distance[i]) / h;
+    s.max_err = std::max(s.max_err, err);
+    sum += err;
+    ++s.compared;
+    if (ref.distance[i] > 1e-3 * h && (values[i] < 0) != bool(ref.inside[i])) ++s.sign_errors;
+  }
+  s.mean_err = s.compared ? sum / s.compared : 0;
+  return s;
+}
+
+// Finds the sample voxels' values in streamed bricks without keeping the field.
+class SampleProbe {
+ public:
+  explicit SampleProbe(const std::vector<Coord>& voxels) : values_(voxels.size(), NAN) {
+    for (size_t i = 0; i < voxels.size(); ++i) {
+      const Coord& c = voxels[i];
+      by_brick_[key({c.x & ~7, c.y & ~7, c.z & ~7})].push_back({i, brickOffset(c.x & 7, c.y & 7, c.z & 7)});
+    }
+  }
+  void add(const SegmentBricks& s) {
+    for (const Brick& b : s.bricks) {
+      auto it = by_brick_.find(key(b.origin));
+      if (it == by_brick_.end()) continue;
+      for (const auto& [i, off] : it->second)
+        if (b.mask.test(off)) values_[i] = b.values[off];
+    }
+  }
+  const std::vector<float>& values() const { return values_; }
+
+ private:
+  static uint64_t key(const Coord& c) {
+    return (uint64_t(uint32_t(c.z)) << 42) | (uint64_t(uint32_t(c.y)) << 21) | uint64_t(uint32_t(c.x));
+  }
+  std::unordered_map<uint64_t, std::vector<std::pair<size_t, int>>> by_brick_;
+  std::vector<float> values_;
+};
+
+struct DistbandRun {
+  double seeds_s = 0, engine_s = 0, output_s = 0, total_s = 0;
+  int64_t voxels = 0, band_voxels = 0;
+  EngineResult result;
+};
+
+// One distband run. `consume` sees every segment (inside the timed region).
+// Closed meshes are signed with pseudonormals, open ones (the teapot) with the winding number.
+DistbandRun runDistband(const Grid& grid, const MeshInput& in, MeshSiteMode mode, double limit_vox,
+                        double segment_vox, const Options& o, const std::function<void(SegmentBricks&)>& consume) {
+  const TriangleMesh& mesh = in.mesh;
+  DistbandRun run;
+  const auto t0 = Clock::now();
+  MeshSeedOptions so;
+  so.mode = mode;
+  so.sign = in.report.closed() ? SignMethod::kPseudonormal : SignMethod::kWinding;
+  so.limit_voxels = limit_vox;
+  Seeds seeds;
+  MeshSeedStats stats;
+  if (std::string e = makeMeshSeeds(grid, mesh, so, &seeds, &stats); !e.empty()) throw std::runtime_error(e);
+  run.seeds_s = since(t0);
+  run.band_voxels = stats.band_voxels;
+  EngineOptions eo;
+  eo.mode = mode == MeshSiteMode::kPaper ? PropagationMode::kPaper : o.feature_engine;
+  eo.stencil = *parseStencil(o.stencil);
+  eo.limit_world = limit_vox * grid.voxelSize();
+  eo.segment_length_world = segment_vox * grid.voxelSize();
+  eo.threads = o.threads;
+  double consume_s = 0;
+  run.result = computeDistanceField(grid, seeds, eo, [&](SegmentBricks&& s) {
+    const auto tc = Clock::now();
+    consume(s);
+    consume_s += since(tc);
+  });
+  run.total_s = since(t0);
+  run.output_s = consume_s;
+  run.engine_s = run.total_s - run.seeds_s - consume_s;
+  run.voxels = run.result.voxels;
+  return run;
+}
+
+std::vector<Coord> uniformGridSample(const Grid& grid, int n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::vector<Coord> v;
+  for (int i = 0; i < n; ++i)
+    v.push_back({int(rng() % grid.dims().x), int(rng() % grid.dims().y), int(rng() % grid.dims().z)});
+  return v;
+}
+
+// ---- Table 1 (+ Fig. 6 from the per-segment stats) ----
+json table1(const Options& o) {
+  json rows = json::array();
+  for (const std::string& file : o.table1_meshes) {
+    const MeshInput in = loadInput(o, file);
+    for (int res : o.resolutions) {
+      const Grid grid = gridFor(in.mesh, res, o.padding);
+      const Reference ref = reference(in.mesh, grid, uniformGridSample(grid, o.samples, 11));
+      for (double seg : {o.segment, 0.0})
+        for (MeshSiteMode mode : {MeshSiteMode::kPaper, MeshSiteMode::kExactFeature}) {
+          SampleProbe probe(ref.voxels);
+          const DistbandRun run = runDistband(grid, in, mode, std::numeric_limits<double>::infinity(), seg, o,
+                                              [&](SegmentBricks& s) { probe.add(s); });
+          const ErrorStats err = compare(ref, probe.values(), grid.voxelSize());
+          json row = {{"mesh", in.name}, {"res", res}, {"dims", {grid.dims().x, grid.dims().y, grid.dims().z}},
+                      {"mode", meshSiteModeName(mode)}, {"segment", seg}, {"time_s", run.total_s},
+                      {"seeds_s", run.seeds_s}, {"engine_s", run.engine_s}, {"voxels", run.voxels},
+                      {"steps", run.result.steps}, {"error", err.toJson()}};
+          json segs = json::array();
+          for (const SegmentStats& s : run.result.segments)
+            segs.push_back({{"lower", s.lower_world / grid.voxelSize()}, {"upper", s.upper_world / grid.voxelSize()},
+                            {"voxels", s.voxels}, {"seconds", s.seconds}});
+          row["segments"] = segs;
+          fmt::print("table1 {} {}^3 {} l_seg={} : {:.3f} s (seeds {:.3f}), max err {:.4f} vox, sign errors {}\n",
+                     in.name, res, meshSiteModeName(mode), seg, run.total_s, run.seeds_s, err.max_err,
+                     err.sign_errors);
+          std::fflush(stdout);
+          rows.push_back(row);
+        }
+    }
+  }
+  return rows;
+}
+
+// ---- distband vs OpenVDB at one resolution and several half-widths ----
+openvdb::FloatGrid::Ptr runOpenVdb(const MeshInput& in, const Grid& grid, int hw, double* seconds) {
+  std::vector<openvdb::Vec3s> points;
+  std::vector<openvdb::Vec3I> tris;
+  std::vector<openvdb::Vec4I> quads;
+  for (const Vec3d& v : in.mesh.vertices) points.emplace_back(float(v.x), float(v.y), float(v.z));
+  for (const auto& t : in.mesh.triangles) tris.emplace_back(t[0], t[1], t[2]);
+  auto xf = openvdb::math::Transform::createLinearTransform(grid.voxelSize());
+  xf->postTranslate(openvdb::Vec3d(grid.origin().x, grid.origin().y, grid.origin().z));
+  const auto t0 = Clock::now();
+  auto vdb = openvdb::tools::meshToSignedDistanceField<openvdb::FloatGrid>(*xf, points, tris, quads, float(hw),
+                                                                           float(hw));
+  *seconds = since(t0);
+  return vdb;
+}
+
+json openvdbSuite(const Options& o) {
+  json rows = json::array();
+  for (const std::string& file : o.openvdb_meshes) {
+    const MeshInput in = loadInput(o, file);
+    // The Table 1 voxel size at this resolution; the grid is padded by the half-width (+1) so distband computes
+    // the whole band OpenVDB computes (same lattice and transform origin for both).
+    const Grid base = gridFor(in.mesh, o.openvdb_resolution, o.padding);
+    for (int hw : o.half_widths) {
+      Grid grid;
+      MeshGridOptions go;
+      go.voxel_size = base.voxelSize();
+      go.padding_voxels = hw + 1;
+      if (std::string e = gridForMesh(in.mesh, go, &grid); !e.empty()) throw std::runtime_error(e);
+      json row = {{"mesh", in.name}, {"res", o.openvdb_resolution}, {"half_width", hw},
+                  {"dims", {grid.dims().x, grid.dims().y, grid.dims().z}}, {"threads", o.threads}};
+      // distband exact-feature first: its delivered band gives the sample voxels.
+      std::shared_ptr<void> handle;
+      DistbandRun exact;
+      {
+        VdbFieldBuilder builder(grid, float(hw * grid.voxelSize()));
+        exact = runDistband(grid, in, MeshSiteMode::kExactFeature, hw, 0, o, [&](SegmentBricks& s) {
+          builder.add(s);
+        });
+        const auto tf = Clock::now();
+        builder.finish();
+        exact.output_s += since(tf);
+        exact.total_s += since(tf);
+        handle = builder.gridHandle();
+      }
+      auto dgrid = std::static_pointer_cast<openvdb::FloatGrid>(handle);
+      // Sample voxels uniformly from distband's active band.
+      {
+        std::vector<Coord> all;
+        all.reserve(dgrid->activeVoxelCount());
+        for (auto it = dgrid->cbeginValueOn(); it; ++it) all.push_back({it.getCoord().x(), it.getCoord().y(), it.getCoord().z()});
+        std::mt19937 rng(5);
+        std::shuffle(all.begin(), all.end(), rng);
+        all.resize(std::min<size_t>(all.size(), o.samples));
+        const Reference ref = reference(in.mesh, grid, all);
+        auto valuesFrom = [&](const openvdb::FloatGrid& g) {
+          std::vector<float> v(ref.voxels.size(), NAN);
+          auto acc = g.getConstAccessor();
+          for (size_t i = 0; i < ref.voxels.size(); ++i) {
+            const openvdb::Coord c(ref.voxels[i].x, ref.voxels[i].y, ref.voxels[i].z);
+            if (acc.isValueOn(c)) v[i] = acc.getValue(c);
+          }
+          return v;
+        };
+        const ErrorStats e_exact = compare(ref, valuesFrom(*dgrid), grid.voxelSize());
+        handle.reset();
+        dgrid.reset();
+        // distband paper mode on the same band.
+        SampleProbe probe(ref.voxels);
+        const DistbandRun paper = runDistband(grid, in, MeshSiteMode::kPaper, hw, 0, o,
+                                              [&](SegmentBricks& s) { probe.add(s); });
+        const ErrorStats e_paper = compare(ref, probe.values(), grid.voxelSize());
+        // OpenVDB.
+        double vdb_s = 0;
+        auto vdb = runOpenVdb(in, grid, hw, &vdb_s);
+        const ErrorStats e_vdb = compare(ref, valuesFrom(*vdb), grid.voxelSize());
+        row["distband_exact"] = {{"time_s", exact.total_s}, {"seeds_s", exact.seeds_s}, {"engine_s", exact.engine_s},
+                                 {"vdb_assembly_s", exact.output_s}, {"voxels", exact.voxels},
+                                 {"error", e_exact.toJson()}};
+        row["distband_paper"] = {{"time_s", paper.total_s}, {"seeds_s", paper.seeds_s}, {"engine_s", paper.engine_s},
+                                 {"voxels", paper.voxels}, {"error", e_paper.toJson()}};
+        row["openvdb"] = {{"time_s", vdb_s}, {"voxels", int64_t(vdb->activeVoxelCount())}, {"error", e_vdb.toJson()}};
+        row["ratio_exact_over_openvdb"] = exact.total_s / vdb_s;
+        row["ratio_engine_only_over_openvdb"] = (exact.seeds_s + exact.engine_s) / vdb_s;
+        fmt::print("openvdb {} {}^3 hw={} : distband exact {:.3f} s (seeds {:.3f} engine {:.3f} vdb {:.3f}; max {:.4f}, sign {}), paper {:.3f} s (max {:.4f}), "
+                   "OpenVDB {:.3f} s (max {:.4f}, sign {}, missing {}) ratio {:.2f}\n",
+                   in.name, o.openvdb_resolution, hw, exact.total_s, exact.seeds_s, exact.engine_s, exact.output_s, e_exact.max_err, e_exact.sign_errors,
+                   paper.total_s, e_paper.max_err, vdb_s, e_vdb.max_err, e_vdb.sign_errors, e_vdb.missing,
+                   exact.total_s / vdb_s);
+        std::fflush(stdout);
+      }
+      rows.push_back(row);
+    }
+  }
+  return rows;
+}
+
+// ---- Fig. 7: l_seg sweep on the bunny at the largest resolution ----
+json fig7(const Options& o) {
+  json rows = json::array();
+  const MeshInput in = loadInput(o, "bunny.obj");
+  const int res = o.resolutions.back();
+  const Grid grid = gridFor(in.mesh, res, o.padding);
+  for (double seg : {5.0, 10.0, 20.0, 40.0, 80.0, 0.0})
+    for (MeshSiteMode mode : {MeshSiteMode::kPaper, MeshSiteMode::kExactFeature}) {
+      const DistbandRun run = runDistband(grid, in, mode, std::numeric_limits<double>::infinity(), seg, o,
+                                          [](SegmentBricks&) {});
+      rows.push_back({{"mesh", in.name}, {"res", res}, {"mode", meshSiteModeName(mode)}, {"segment", seg},
+                      {"time_s", run.total_s}, {"steps", run.result.steps}});
+      fmt::print("fig7 bunny {}^3 {} l_seg={} : {:.3f} s\n", res, meshSiteModeName(mode), seg, run.total_s);
+      std::fflush(stdout);
+    }
+  return rows;
+}
+
+// ---- memory case (one per process) ----
+json memoryCase(const Options& o) {
+  const MeshInput in = loadInput(o, o.memory_mesh);
+  const Grid base = gridFor(in.mesh, o.memory_resolution, o.padding);
+  Grid grid;
+  MeshGridOptions go;
+  go.voxel_size = base.voxelSize();
+  go.padding_voxels = o.memory_half_width + 1;
+  if (std::string e = gridForMesh(in.mesh, go, &grid); !e.empty()) throw std::runtime_error(e);
+  const double rss_before = peakRssMb();
+  json row = {{"case", o.run_case}, {"mesh", in.name}, {"res", o.memory_resolution},
+              {"half_width", o.memory_half_width}, {"threads", o.threads},
+              {"dims", {grid.dims().x, grid.dims().y, grid.dims().z}}, {"rss_after_load_mb", rss_before}};
+  if (o.run_case == "memory-distband") {
+    VdbFieldBuilder builder(grid, float(o.memory_half_width * grid.voxelSize()));
+    DistbandRun run = runDistband(grid, in, MeshSiteMode::kExactFeature, o.memory_half_width, 0, o,
+                                  [&](SegmentBricks& s) { builder.add(s); });
+    builder.finish();
+    row["time_s"] = run.total_s;
+    row["seeds_s"] = run.seeds_s;
+    row["band_voxels"] = run.band_voxels;
+    row["active_voxels"] = builder.activeVoxels();
+  } else if (o.run_case == "memory-distband-discard") {  // same run, output dropped: the engine's own footprint
+    DistbandRun run = runDistband(grid, in, MeshSiteMode::kExactFeature, o.memory_half_width, 0, o,
+                                  [&](SegmentBricks&) {});
+    row["time_s"] = run.total_s;
+    row["band_voxels"] = run.band_voxels;
+    row["active_voxels"] = run.voxels;
+  } else if (o.run_case == "memory-seeds") {  // the initial band alone
+    MeshSeedOptions so;
+    so.limit_voxels = o.memory_half_width;
+    Seeds seeds;
+    const auto t0 = Clock::now();
+    if (std::string e = makeMeshSeeds(grid, in.mesh, so, &seeds); !e.empty()) throw std::runtime_error(e);
+    row["time_s"] = since(t0);
+    row["band_voxels"] = int64_t(seeds.band.size());
+  } else if (o.run_case == "memory-openvdb") {
+    double s = 0;
+    auto vdb = runOpenVdb(in, grid, o.memory_half_width, &s);
+    row["time_s"] = s;
+    row["active_voxels"] = int64_t(vdb->activeVoxelCount());
+  } else {
+    throw std::runtime_error("unknown --case " + o.run_case);
+  }
+  row["peak_rss_mb"] = peakRssMb();
+  return row;
+}
+
+json memorySuite(const Options& o, const std::string& self) {
+  json rows = json::array();
+  for (const char* c : {"memory-distband", "memory-distband-discard", "memory-seeds", "memory-openvdb"}) {
+    const std::string cmd =
+        fmt::format("/usr/bin/time -v '{}' --case {} --mesh-dir '{}' --threads {} --memory-res {} --memory-half-width {} "
+                    "--memory-mesh '{}' 2>&1",
+                    self, c, o.mesh_dir, o.threads, o.memory_resolution, o.memory_half_width, o.memory_mesh);
+    FILE* p = popen(cmd.c_str(), "r");
+    if (!p) throw std::runtime_error("cannot run " + cmd);
+    std::string out;
+    char buf[4096];
+    while (size_t n = fread(buf, 1, sizeof buf, p)) out.append(buf, n);
+    pclose(p);
+    json row;
+    std::istringstream lines(out);
+    for (std::string line; std::getline(lines, line);) {
+      if (!line.empty() && line[0] == '{') row = json::parse(line);
+      if (auto k = line.find("Maximum resident set size (kbytes):"); k != std::string::npos)
+        row["time_v_peak_rss_mb"] = std::stod(line.substr(k + 35)) / 1024.0;
+    }
+    fmt::print("memory {}: {}\n", c, row.dump());
+    std::fflush(stdout);
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+std::string num(const json& v, const char* f = "{:.3f}") {
+  return v.is_number() ? fmt::format(fmt::runtime(f), v.get<double>()) : "-";
+}
+
+std::string markdown(const json& out) {
+  std::string md = fmt::format("# mesh_bench results ({})\n\n", out["tag"].get<std::string>());
+  md += fmt::format("- machine: {} threads (TBB global_control + engine task_arena), load average at start: {}\n",
+                    out["threads"].get<int>(), out["loadavg_start"].get<std::string>());
+  md += "- errors in voxels vs brute force (exact point–triangle distance over all triangles); sign reference: exact "
+        "generalized winding number > 0.5\n- distband sign: pseudonormal; engine stencil: " +
+        out["stencil"].get<std::string>() + "; paper mode = CP+PQ point sites + the paper's lifespan, exact-feature = "
+        "triangle-id sites + the engine's " + out["feature_engine"].get<std::string>() + " mode; open meshes are signed with the winding number\n\n";
+  if (out.contains("table1")) {
+    md += "## Table 1 (whole volume, no limit): time in seconds, paper vs exact-feature\n\n"
+          "| mesh | res | l_seg | paper s | paper max err | paper mean err | exact-feature s | exact max err | "
+          "exact mean err | sign errors (paper/exact) |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    const json& rows = out["table1"];
+    for (size_t i = 0; i + 1 < rows.size(); i += 2) {
+      const json &p = rows[i], &e = rows[i + 1];
+      md += fmt::format("| {} | {}³ | {} | {} | {} | {} | {} | {} | {} | {}/{} |\n", p["mesh"].get<std::string>(),
+                        p["res"].get<int>(), p["segment"].get<double>() > 0 ? num(p["segment"], "{:.0f}") : "-",
+                        num(p["time_s"]), num(p["error"]["max_err_vox"], "{:.4f}"),
+                        num(p["error"]["mean_err_vox"], "{:.5f}"), num(e["time_s"]),
+                        num(e["error"]["max_err_vox"], "{:.4f}"), num(e["error"]["mean_err_vox"], "{:.5f}"),
+                        p["error"]["sign_errors"].get<int64_t>(), e["error"]["sign_errors"].get<int64_t>());
+    }
+    md += "\n### Fig. 6: time per distance range (bunny, largest resolution, l_seg = 20)\n\n"
+          "| mode | range (voxels) | voxels | seconds |\n|---|---|---|---|\n";
+    for (const json& r : rows)
+      if (r["mesh"] == "bunny" && r["res"] == out["max_res"] && r["segment"].get<double>() > 0)
+        for (const json& s : r["segments"])
+          md += fmt::format("| {} | {:.0f}–{:.0f} | {} | {:.3f} |\n", r["mode"].get<std::string>(),
+                            s["lower"].get<double>(), std::min(s["upper"].get<double>(), 1e9),
+                            s["voxels"].get<int64_t>(), s["seconds"].get<double>());
+  }
+  if (out.contains("openvdb")) {
+    md += "\n## distband vs OpenVDB meshToSignedDistanceField (same transform, same band, same threads)\n\n"
+          "| mesh | res | half-width | distband exact s | (engine+seeds s) | OpenVDB s | ratio | exact max/mean err | "
+          "OpenVDB max/mean err | sign errors exact/OpenVDB | OpenVDB missing | paper s | paper max/mean err |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    for (const json& r : out["openvdb"]) {
+      const json &e = r["distband_exact"], &v = r["openvdb"], &p = r["distband_paper"];
+      md += fmt::format("| {} | {}³ | {} | {} | {} | {} | {:.2f} | {} / {} | {} / {} | {} / {} | {} | {} | {} / {} |\n",
+                        r["mesh"].get<std::string>(), r["res"].get<int>(), r["half_width"].get<int>(),
+                        num(e["time_s"]), num(e["seeds_s"].get<double>() + e["engine_s"].get<double>()),
+                        num(v["time_s"]), r["ratio_exact_over_openvdb"].get<double>(),
+                        num(e["error"]["max_err_vox"], "{:.4f}"), num(e["error"]["mean_err_vox"], "{:.5f}"),
+                        num(v["error"]["max_err_vox"], "{:.4f}"), num(v["error"]["mean_err_vox"], "{:.5f}"),
+                        e["error"]["sign_errors"].get<int64_t>(), v["error"]["sign_errors"].get<int64_t>(),
+                        v["error"]["missing"].get<int64_t>(), num(p["time_s"]),
+                        num(p["error"]["max_err_vox"], "{:.4f}"), num(p["error"]["mean_err_vox"], "{:.5f}"));
+    }
+  }
+  if (out.contains("fig7")) {
+    md += "\n## Fig. 7: l_seg sweep (bunny, whole volume)\n\n| mode | l_seg | seconds | steps |\n|---|---|---|---|\n";
+    for (const json& r : out["fig7"])
+      md += fmt::format("| {} | {} | {} | {} |\n", r["mode"].get<std::string>(),
+                        r["segment"].get<double>() > 0 ? num(r["segment"], "{:.0f}") : "none", num(r["time_s"]),
+                        r["steps"].get<int>());
+  }
+  if (out.contains("memory")) {
+    md += "\n## Memory: peak RSS (separate processes, /usr/bin/time -v)\n\n"
+          "| case | mesh | res | half-width | time s | active voxels | peak RSS MB |\n|---|---|---|---|---|---|---|\n";
+    for (const json& r : out["memory"])
+      md += fmt::format("| {} | {} | {}³ | {} | {} | {} | {} |\n", r.value("case", "?"), r.value("mesh", "?"),
+                        r.value("res", 0), r.value("half_width", 0), num(r.value("time_s", json())),
+                        r.value("active_voxels", r.value("band_voxels", int64_t(0))), num(r.value("time_v_peak_rss_mb", json()), "{:.0f}"));
+  }
+  return md;
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream f(path);
+  std::string s;
+  std::getline(f, s);
+  return s;
+}
+
+}  // namespace
+}  // namespace distband
+
+int main(int argc, char** argv) {
+  using namespace distband;
+  Options o;
+  CLI::App app{"distband mesh benchmark: Table 1 mesh rows and OpenVDB meshToSignedDistanceField"};
+  app.add_option("--mesh-dir", o.mesh_dir, "directory holding the meshes");
+  app.add_option("--out-dir", o.out_dir, "where <tag>.json and <tag>.md go");
+  app.add_option("--tag", o.tag, "output file stem");
+  app.add_option("--suite", o.suites, "table1, openvdb, fig7, memory")->delimiter(',');
+  app.add_option("--meshes", o.table1_meshes, "Table 1 meshes")->delimiter(',');
+  app.add_option("--openvdb-meshes", o.openvdb_meshes, "meshes for the OpenVDB comparison")->delimiter(',');
+  app.add_option("--resolutions", o.resolutions, "Table 1 resolutions")->delimiter(',');
+  app.add_option("--openvdb-res", o.openvdb_resolution, "resolution of the OpenVDB comparison");
+  app.add_option("--half-widths", o.half_widths, "band half-widths (voxels) for the OpenVDB comparison")->delimiter(',');
+  app.add_option("--threads", o.threads, "TBB threads for both distband and OpenVDB");
+  app.add_option("--samples", o.samples, "sampled voxels for the error statistics");
+  app.add_option("--padding", o.padding, "padding (voxels) of the Table 1 grid");
+  app.add_option("--segment", o.segment, "l_seg (voxels) of the segmented Table 1 rows");
+  app.add_option("--stencil", o.stencil, "engine stencil");
+  app.add_option("--case", o.run_case, "memory-distband | memory-openvdb: one memory row in this process");
+  app.add_option("--memory-mesh", o.memory_mesh, "mesh of the memory case");
+  app.add_option("--memory-res", o.memory_resolution, "resolution of the memory case");
+  app.add_option("--memory-half-width", o.memory_half_width, "half-width of the memory case");
+  std::string feature_engine = "exact";
+  app.add_option("--feature-engine", feature_engine,
+                 "engine mode of the exact-feature rows: exact (iterate to convergence) or paper (lifespan)");
+  CLI11_PARSE(app, argc, argv);
+  if (!parseMode(feature_engine, &o.feature_engine)) {
+    fmt::print(stderr, "unknown engine mode {}\n", feature_engine);
+    return 2;
+  }
+  if (!parseStencil(o.stencil)) {
+    fmt::print(stderr, "unknown stencil {}\n", o.stencil);
+    return 2;
+  }
+  openvdb::initialize();
+  tbb::global_control threads(tbb::global_control::max_allowed_parallelism, o.threads);
+  try {
+    if (!o.run_case.empty()) {
+      fmt::print("{}\n", memoryCase(o).dump());
+      return 0;
+    }
+    json out = {{"tag", o.tag}, {"threads", o.threads}, {"stencil", o.stencil},
+                {"feature_engine", std::string(modeName(o.feature_engine))},
+                {"loadavg_start", slurp("/proc/loadavg")}, {"max_res", o.resolutions.back()}};
+    auto has = [&](const char* s) { return std::find(o.suites.begin(), o.suites.end(), s) != o.suites.end(); };
+    std::filesystem::create_directories(o.out_dir);
+    auto save = [&] {
+      std::ofstream(o.out_dir + "/" + o.tag + ".json") << out.dump(2) << "\n";
+      std::ofstream(o.out_dir + "/" + o.tag + ".md") << markdown(out);
+    };
+    if (has("openvdb")) out["openvdb"] = openvdbSuite(o), save();
+    if (has("table1")) out["table1"] = table1(o), save();
+    if (has("fig7")) out["fig7"] = fig7(o), save();
+    if (has("memory")) out["memory"] = memorySuite(o, std::filesystem::canonical("/proc/self/exe").string()), save();
+    save();
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "mesh_bench: {}\n", e.what());
+    return 1;
+  }
+  return 0;
+}
