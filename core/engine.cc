@@ -146,7 +146,6 @@ struct ThreadBuffers {
   std::vector<FrontEntry> deferred;   // offers held back beyond the admission threshold (voxel, site)
   std::vector<uint32_t> pending;      // bricks that got their first unemitted voxel
   std::vector<BrickState*> allocated;
-  std::vector<VoxelRef> candidates;   // correction candidates found by a scan
   std::vector<std::pair<VoxelRef, uint64_t>> corrections;
   std::vector<VoxelRef> dirty;        // changed since the last correction round (exact mode)
   int64_t updates = 0;
@@ -284,7 +283,8 @@ class BandRun {
   void insertBand();
   void step(std::vector<FrontEntry>& front);
   bool isBoundary(const Coord& q, uint64_t k) const;
-  std::vector<VoxelRef> scanCandidates();
+  void scanAndCheck();
+  void checkVoxel(const VoxelRef& v, const Coord& q, uint64_t k, uint64_t* block, ThreadBuffers& tb) const;
   std::vector<FrontEntry> correct(bool first_round);
   void gatherBlock(const Coord& q, uint64_t* block) const;
   bool emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats);
@@ -498,10 +498,10 @@ bool BandRun::isBoundary(const Coord& q, uint64_t k) const {
   return false;
 }
 
-// All voxels of the current segment (delivered at its end) that sit where different sites meet. A brick whose
-// voxels all hold one site, like its 26 neighbours, has none and is skipped whole: far from Voronoi boundaries
+// Checks every voxel of the current segment (delivered at its end) that sits where different sites meet. A brick
+// whose voxels all hold one site, like its 26 neighbours, has none and is skipped whole: far from Voronoi boundaries
 // (most of the volume for point seeds) the scan costs one pass over a brick's keys.
-std::vector<VoxelRef> BandRun::scanCandidates() {
+void BandRun::scanAndCheck() {
   const size_t n = pending_bricks_.size();
   constexpr uint32_t kMixed = ~uint32_t(0), kEmpty = ~uint32_t(0) - 1;
   std::vector<uint32_t> uniform(n);
@@ -534,6 +534,7 @@ std::vector<VoxelRef> BandRun::scanCandidates() {
   };
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
     ThreadBuffers& tb = buffers_.local();
+    uint64_t block[125];
     for (size_t i = r.begin(); i != r.end(); ++i) {
       const uint32_t bi = pending_bricks_[i];
       BrickState* b = table_[bi].load(std::memory_order_relaxed);
@@ -582,16 +583,27 @@ std::vector<VoxelRef> BandRun::scanCandidates() {
           boundary = true;
           break;
         }
-        if (boundary) tb.candidates.push_back({bi, uint16_t(off)});
+        if (boundary) checkVoxel({bi, uint16_t(off)}, q, k, block, tb);
       }
     }
   });
-  std::vector<VoxelRef> out;
-  for (auto& tb : buffers_) {
-    out.insert(out.end(), tb.candidates.begin(), tb.candidates.end());
-    tb.candidates.clear();
+}
+
+// Tries every site held within Chebyshev distance 2 of voxel v (key k); a better one is recorded as a correction.
+void BandRun::checkVoxel(const VoxelRef& v, const Coord& q, uint64_t k, uint64_t* block, ThreadBuffers& tb) const {
+  gatherBlock(q, block);
+  uint64_t best = k;
+  uint32_t last_site = keySite(k);
+  for (int j = 0; j < 125; ++j) {
+    const uint64_t nk = block[j];
+    if (nk == kUntouched) continue;
+    const uint32_t s = keySite(nk);
+    if (s == last_site || s == keySite(best)) continue;
+    last_site = s;
+    const uint64_t cand = packKey(metric_.key2(s, q.x, q.y, q.z), kNoDirection, s);
+    if (cand < best) best = cand;
   }
-  return out;
+  if (keySite(best) != keySite(k)) tb.corrections.push_back({v, best});
 }
 
 // The second-ring correction (exact mode). A voxel whose true closest site is held by none of its stencil
@@ -603,7 +615,7 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
   std::vector<VoxelRef> candidates;
   if (first_round) {
     collectPending();
-    candidates = scanCandidates();
+    scanAndCheck();
   } else {
     for (auto& tb : buffers_) {
       for (const VoxelRef& d : tb.dirty) {
@@ -641,20 +653,7 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
       const uint64_t k = b->key[v.offset].load(std::memory_order_relaxed);
       if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey) continue;
       const Coord q = b->origin + brickLocal(v.offset);
-      if (!first_round && !isBoundary(q, k)) continue;
-      gatherBlock(q, block);
-      uint64_t best = k;
-      uint32_t last_site = keySite(k);
-      for (int j = 0; j < 125; ++j) {
-        const uint64_t nk = block[j];
-        if (nk == kUntouched) continue;
-        const uint32_t s = keySite(nk);
-        if (s == last_site || s == keySite(best)) continue;
-        last_site = s;
-        const uint64_t cand = packKey(metric_.key2(s, q.x, q.y, q.z), kNoDirection, s);
-        if (cand < best) best = cand;
-      }
-      if (keySite(best) != keySite(k)) tb.corrections.push_back({v, best});
+      if (isBoundary(q, k)) checkVoxel(v, q, k, block, tb);
     }
   });
   std::vector<FrontEntry> front;
@@ -752,57 +751,62 @@ void BandRun::rearmLifespans() {
 bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats) {
   collectPending();
   const double h = grid_.voxelSize();
-  std::vector<Brick> out(pending_bricks_.size());
-  std::vector<uint8_t> keep(pending_bricks_.size(), 0);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, pending_bricks_.size(), 16),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                      uint32_t sites[kBrickVoxels];
-                      for (size_t i = r.begin(); i != r.end(); ++i) {
-                        BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
-                        Brick& brick = out[i];
-                        brick.origin = b->origin;
-                        bool remaining = false;
-                        for (int off = 0; off < kBrickVoxels; ++off) {
-                          const uint64_t k = b->key[off].load(std::memory_order_relaxed);
-                          sites[off] = kNoSite;
-                          if (k == kUntouched) continue;
-                          const uint8_t f = b->flags[off].load(std::memory_order_relaxed);
-                          if (f & kEmitted) continue;
-                          if (keyDist2(k) > thr2_) {
-                            remaining = true;
-                            continue;
-                          }
-                          const Coord c = b->origin + brickLocal(off);
-                          const uint32_t s = keySite(k);
-                          sites[off] = s == kNoSiteKey ? kNoSite : s;
-                          brick.values[off] = float(std::sqrt(metric_.dist2(s, c.x, c.y, c.z)) * h);
-                          brick.mask.set(off);
-                          b->flags[off].store(f | kEmitted, std::memory_order_relaxed);
-                        }
-                        if (!remaining) b->pending.store(false, std::memory_order_relaxed);
-                        keep[i] = remaining;
-                        if (seeds_.sign && !brick.mask.empty()) seeds_.sign(brick, sites);
-                      }
-                    });
+  const size_t n = pending_bricks_.size();
+  // Pass 1: which pending bricks deliver voxels now, and which keep voxels for later segments. The output is then
+  // built in place, exactly sized: a segment's bricks are held once (2 KiB each), never copied or sorted (pending
+  // bricks are sorted by index, which is (z, y, x) order of their origins).
+  std::vector<uint32_t> slot(n, 0);  // 1 + position in the output, or 0
+  std::vector<uint8_t> keep(n, 0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
+      for (int off = 0; off < kBrickVoxels && !(slot[i] && keep[i]); ++off) {
+        const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+        if (k == kUntouched || (b->flags[off].load(std::memory_order_relaxed) & kEmitted)) continue;
+        if (keyDist2(k) > thr2_) keep[i] = 1;
+        else slot[i] = 1;
+      }
+    }
+  });
+  uint32_t count = 0;
+  for (uint32_t& s : slot) s = s ? ++count : 0;
+  SegmentBricks seg;
+  seg.bricks.resize(count);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+    uint32_t sites[kBrickVoxels];
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
+      if (!keep[i]) b->pending.store(false, std::memory_order_relaxed);
+      if (!slot[i]) continue;
+      Brick& brick = seg.bricks[slot[i] - 1];
+      brick.origin = b->origin;
+      for (int off = 0; off < kBrickVoxels; ++off) {
+        const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+        sites[off] = kNoSite;
+        if (k == kUntouched || keyDist2(k) > thr2_) continue;
+        const uint8_t f = b->flags[off].load(std::memory_order_relaxed);
+        if (f & kEmitted) continue;
+        const Coord c = b->origin + brickLocal(off);
+        const uint32_t s = keySite(k);
+        sites[off] = s == kNoSiteKey ? kNoSite : s;
+        brick.values[off] = float(std::sqrt(metric_.dist2(s, c.x, c.y, c.z)) * h);
+        brick.mask.set(off);
+        b->flags[off].store(f | kEmitted, std::memory_order_relaxed);
+      }
+      if (seeds_.sign) seeds_.sign(brick, sites);
+    }
+  });
   bool waiting = false;
   for (uint8_t kept : keep) waiting |= kept != 0;
   const bool last = thr_is_limit_ || (nothing_deferred && !waiting);
-  SegmentBricks seg;
   seg.index = index;
   seg.lower_world = lower_vox * h;
   seg.upper_world = upper_vox * h;
   seg.last = last;
-  for (size_t i = 0; i < out.size(); ++i) {
-    if (out[i].mask.empty()) continue;
-    stats.voxels += out[i].mask.count();
-    seg.bricks.push_back(std::move(out[i]));
-  }
-  std::sort(seg.bricks.begin(), seg.bricks.end(), [](const Brick& a, const Brick& b) {
-    return std::tie(a.origin.z, a.origin.y, a.origin.x) < std::tie(b.origin.z, b.origin.y, b.origin.x);
-  });
+  for (const Brick& b : seg.bricks) stats.voxels += b.mask.count();
   stats.bricks = int64_t(seg.bricks.size());
   size_t w = 0;
-  for (size_t i = 0; i < pending_bricks_.size(); ++i)
+  for (size_t i = 0; i < n; ++i)
     if (keep[i]) pending_bricks_[w++] = pending_bricks_[i];
   pending_bricks_.resize(w);
   if (cb_) cb_(std::move(seg));
