@@ -106,15 +106,7 @@ std::string writeObj(const std::string& path, const TriangleMeshF& mesh, const s
     flush(false);
   }
   flush(true);
-  std::string err;
-  if (!ok || std::fflush(file) != 0) err = fmt::format("cannot write '{}': {}", tmp, std::strerror(errno));
-  if (err.empty() && ::fsync(fileno(file)) != 0)
-    err = fmt::format("cannot sync '{}': {}", tmp, std::strerror(errno));
-  if (std::fclose(file) != 0 && err.empty()) err = fmt::format("cannot close '{}': {}", tmp, std::strerror(errno));
-  if (err.empty() && std::rename(tmp.c_str(), path.c_str()) != 0)
-    err = fmt::format("cannot rename '{}' to '{}': {}", tmp, path, std::strerror(errno));
-  if (!err.empty()) ::unlink(tmp.c_str());
-  return err;
+  return commitTemp(file, tmp, path, ok ? "" : fmt::format("cannot write '{}': {}", tmp, std::strerror(errno)));
 }
 
 std::string writeIsosurfaceObj(const std::string& path, const openvdb::FloatGrid& grid,

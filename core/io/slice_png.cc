@@ -81,15 +81,7 @@ std::string writePngAtomically(const std::string& path, int width, int height, s
   std::string tmp;
   std::FILE* file = nullptr;
   if (std::string err = openTempBeside(path, "wb", &tmp, &file); !err.empty()) return err;
-  std::string err = encodePng(file, width, height, rows.data());
-  if (std::fflush(file) != 0 && err.empty()) err = fmt::format("cannot write '{}': {}", tmp, std::strerror(errno));
-  if (err.empty() && ::fsync(fileno(file)) != 0)
-    err = fmt::format("cannot sync '{}': {}", tmp, std::strerror(errno));
-  if (std::fclose(file) != 0 && err.empty()) err = fmt::format("cannot close '{}': {}", tmp, std::strerror(errno));
-  if (err.empty() && std::rename(tmp.c_str(), path.c_str()) != 0)
-    err = fmt::format("cannot rename '{}' to '{}': {}", tmp, path, std::strerror(errno));
-  if (!err.empty()) ::unlink(tmp.c_str());
-  return err;
+  return commitTemp(file, tmp, path, encodePng(file, width, height, rows.data()));
 }
 
 }  // namespace

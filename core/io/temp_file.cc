@@ -37,4 +37,15 @@ std::string openTempBeside(const std::string& path, const char* mode, std::strin
   return {};
 }
 
+std::string commitTemp(std::FILE* file, const std::string& tmp, const std::string& path, std::string err) {
+  if (std::fflush(file) != 0 && err.empty()) err = fmt::format("cannot write '{}': {}", tmp, std::strerror(errno));
+  if (err.empty() && ::fsync(fileno(file)) != 0)
+    err = fmt::format("cannot sync '{}': {}", tmp, std::strerror(errno));
+  if (std::fclose(file) != 0 && err.empty()) err = fmt::format("cannot close '{}': {}", tmp, std::strerror(errno));
+  if (err.empty() && std::rename(tmp.c_str(), path.c_str()) != 0)
+    err = fmt::format("cannot rename '{}' to '{}': {}", tmp, path, std::strerror(errno));
+  if (!err.empty()) ::unlink(tmp.c_str());
+  return err;
+}
+
 }  // namespace distband

@@ -12,4 +12,8 @@ namespace distband {
 
 std::string openTempBeside(const std::string& path, const char* mode, std::string* tmp, std::FILE** file);
 
+/// The second half: flushes, syncs and closes `file`, then renames `tmp` over `path`. `error` is what the writer
+/// met so far ("" if nothing); on any error the temporary file is removed and the first error returned.
+std::string commitTemp(std::FILE* file, const std::string& tmp, const std::string& path, std::string error);
+
 }  // namespace distband
