@@ -82,6 +82,7 @@ struct Options {
   std::string stencil = "cubic26";
   std::string run_case;
   PropagationMode feature_engine = PropagationMode::kExact;  ///< engine mode of the exact-feature rows
+  bool second_ring = false;  ///< exact-feature rows: run the engine's second-ring correction (the product does not)
   std::string memory_mesh = "armadillo.off";
   int memory_resolution = 1024;
   int memory_half_width = 3;
@@ -211,6 +212,7 @@ DistbandRun runDistband(const Grid& grid, const MeshInput& in, MeshSiteMode mode
   eo.limit_world = limit_vox * grid.voxelSize();
   eo.segment_length_world = segment_vox * grid.voxelSize();
   eo.threads = o.threads;
+  eo.second_ring = o.second_ring;  // as distband compute and the server run meshes
   double consume_s = 0;
   run.result = computeDistanceField(grid, seeds, eo, [&](SegmentBricks&& s) {
     const auto tc = Clock::now();
@@ -559,6 +561,7 @@ int main(int argc, char** argv) {
   app.add_option("--memory-mesh", o.memory_mesh, "mesh of the memory case");
   app.add_option("--memory-res", o.memory_resolution, "resolution of the memory case");
   app.add_option("--memory-half-width", o.memory_half_width, "half-width of the memory case");
+  app.add_flag("--second-ring", o.second_ring, "exact-feature rows: also run the second-ring correction");
   std::string feature_engine = "exact";
   app.add_option("--feature-engine", feature_engine,
                  "engine mode of the exact-feature rows: exact (iterate to convergence) or paper (lifespan)");
@@ -580,6 +583,7 @@ int main(int argc, char** argv) {
     }
     json out = {{"tag", o.tag}, {"threads", o.threads}, {"stencil", o.stencil},
                 {"feature_engine", std::string(modeName(o.feature_engine))},
+                {"second_ring", o.second_ring},
                 {"loadavg_start", slurp("/proc/loadavg")}, {"max_res", o.resolutions.back()}};
     auto has = [&](const char* s) { return std::find(o.suites.begin(), o.suites.end(), s) != o.suites.end(); };
     std::filesystem::create_directories(o.out_dir);
