@@ -885,10 +885,13 @@ EngineResult BandRun::run() {
     // Offers are admitted up to the current slice (the whole segment without buckets) plus the slack.
     double slice_upper = bucket_vox_ > 0 ? std::min(upper, lower + bucket_vox_) : upper;
     auto admitUpTo = [&](double u) {
-      const bool at_limit = u >= limit_vox_;
-      const double slack = at_limit ? kLimitSlackVoxels : kAdmitSlackVoxels;
-      admit2_ = std::isfinite(u) ? float((u + slack) * (u + slack)) : INFINITY;
+      // A slice whose admission would reach the limit's is the limit's: nothing beyond it is held back.
+      const double limit_admit = limit_vox_ + kLimitSlackVoxels;
+      const bool at_limit = u >= limit_vox_ || u + kAdmitSlackVoxels >= limit_admit;
+      const double admit = at_limit ? limit_admit : u + kAdmitSlackVoxels;
+      admit2_ = std::isfinite(admit) ? float(admit * admit) : INFINITY;
       defer_ = !at_limit;
+      if (at_limit) slice_upper = upper;
     };
     admitUpTo(slice_upper);
     segment_start_step_ = step_;
