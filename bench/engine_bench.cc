@@ -53,6 +53,8 @@
 #include "core/seeds/volume_seeds.h"
 #include "core/stencil.h"
 
+#include "bench/bench_util.h"
+
 #ifndef DISTBAND_BENCH_DIR
 #define DISTBAND_BENCH_DIR "bench"
 #endif
@@ -61,6 +63,8 @@ namespace distband {
 namespace {
 
 using json = nlohmann::json;
+using bench::peakRssMb;
+using bench::runCommand;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr float kUndelivered = -1.0f;  // DenseField background: no voxel the engine delivers is negative here
 constexpr double kOffTolerance = 1e-4;
@@ -386,12 +390,6 @@ ErrorStats compareDense(const std::vector<float>& field, int n, double limit, Ex
       });
 }
 
-double peakRssMb() {
-  rusage ru{};
-  getrusage(RUSAGE_SELF, &ru);
-  return ru.ru_maxrss / 1024.0;  // ru_maxrss is in KiB on Linux
-}
-
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   const size_t m = v.size() / 2;
@@ -657,18 +655,6 @@ std::vector<Row> planRows(const DriverOptions& o) {
   return rows;
 }
 
-/// Runs a shell command, returning its stdout and exit status.
-std::pair<std::string, int> runCommand(const std::string& cmd) {
-  std::string out;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return {"", -1};
-  std::array<char, 4096> buf{};
-  size_t got;
-  while ((got = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), got);
-  const int status = pclose(p);
-  return {out, WIFEXITED(status) ? WEXITSTATUS(status) : -1};
-}
-
 std::string slurp(const std::string& path) {
   std::ifstream f(path);
   std::stringstream ss;
@@ -913,9 +899,7 @@ int runDriver(DriverOptions o) {
                  {"error", fmt::format("exit {}: {}", rc, lastLine(slurp(err_file)))}};
     }
     if (have_time) {
-      const std::string tv = slurp(rss_file);
-      const size_t p = tv.find("Maximum resident set size (kbytes):");
-      if (p != std::string::npos) row["time_v_peak_rss_mb"] = std::atof(tv.c_str() + p + 36) / 1024.0;
+      if (const auto mb = bench::timeVPeakRssMb(slurp(rss_file))) row["time_v_peak_rss_mb"] = *mb;
     }
     row["groups"] = rows[k].groups;
     if (!peer.is_null() && peer.contains("median_s")) {

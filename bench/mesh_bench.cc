@@ -48,6 +48,8 @@
 #include "core/seeds/mesh_seeds.h"
 #include "tests/support/brute_mesh.h"
 
+#include "bench/bench_util.h"
+
 #ifndef DISTBAND_BENCH_DIR
 #define DISTBAND_BENCH_DIR "bench"
 #endif
@@ -59,11 +61,7 @@ using json = nlohmann::json;
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-double peakRssMb() {
-  rusage ru{};
-  getrusage(RUSAGE_SELF, &ru);
-  return ru.ru_maxrss / 1024.0;
-}
+using bench::peakRssMb;
 
 struct Options {
   std::string mesh_dir = "/work/shared/data/meshes";
@@ -438,19 +436,13 @@ json memorySuite(const Options& o, const std::string& self) {
         fmt::format("/usr/bin/time -v '{}' --case {} --mesh-dir '{}' --threads {} --memory-res {} --memory-half-width {} "
                     "--memory-mesh '{}' 2>&1",
                     self, c, o.mesh_dir, o.threads, o.memory_resolution, o.memory_half_width, o.memory_mesh);
-    FILE* p = popen(cmd.c_str(), "r");
-    if (!p) throw std::runtime_error("cannot run " + cmd);
-    std::string out;
-    char buf[4096];
-    while (size_t n = fread(buf, 1, sizeof buf, p)) out.append(buf, n);
-    pclose(p);
+    const auto [out, rc] = bench::runCommand(cmd);
+    if (rc < 0) throw std::runtime_error("cannot run " + cmd);
     json row;
     std::istringstream lines(out);
-    for (std::string line; std::getline(lines, line);) {
+    for (std::string line; std::getline(lines, line);)
       if (!line.empty() && line[0] == '{') row = json::parse(line);
-      if (auto k = line.find("Maximum resident set size (kbytes):"); k != std::string::npos)
-        row["time_v_peak_rss_mb"] = std::stod(line.substr(k + 35)) / 1024.0;
-    }
+    if (const auto mb = bench::timeVPeakRssMb(out)) row["time_v_peak_rss_mb"] = *mb;
     fmt::print("memory {}: {}\n", c, row.dump());
     std::fflush(stdout);
     rows.push_back(row);
