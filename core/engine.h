@@ -3,15 +3,18 @@
 //   computeDistanceField(grid, seeds, options, on_segment) propagates closest sites from seeds.band over the
 //   grid and hands every finished segment's bricks to `on_segment`, nearest first, on the calling thread.
 //   * Segment i delivers the voxels whose |distance| lies in (i*L, (i+1)*L] (segment 0 includes 0), L =
-//     options.segment_length (0: one segment up to the limit). Every voxel with |distance| <= limit is
-//     delivered exactly once; nothing beyond the limit is computed or stored.
+//     options.segment_length (0: one segment up to the limit). Every voxel reached with |distance| <= limit is
+//     delivered exactly once, in the segment its final value falls in (in rare cases a voxel's closest site reaches
+//     it only after its segment: it is then delivered, with its better value, in the next one). Nothing beyond the
+//     limit is delivered; the engine computes at most one voxel beyond it (the admission slack).
+//   * Bricks of a segment are sorted by origin (z, y, x); each brick's mask marks the voxels it delivers.
 //   * Storage is sparse: 8^3 bricks allocated when first touched, so memory follows the voxels inside the limit.
 //   * Compute runs on TBB. With options.threads > 0 it runs in a task_arena of that size, otherwise in the
 //     caller's arena. The result is bit-identical for any thread count.
 //   * `interrupted` is polled between steps; when it returns true the run stops and returns
 //     EngineResult::interrupted = true (bricks already delivered stay valid).
-//   * Not re-entrant per Seeds object only in the sense that seeds must outlive the call; concurrent calls
-//     on different (or the same, const) seeds are fine.
+//   * Seeds are only read and must outlive the call; concurrent calls on the same or different seeds are fine.
+//   * Memory: 10 bytes per touched voxel (12 in paper mode), in whole bricks, plus one segment's output bricks.
 #pragma once
 
 #include <cstdint>
@@ -30,7 +33,7 @@ namespace distband {
 
 enum class PropagationMode {
   /// The paper's method: vector propagation of the closest site, a voxel leaves the band when its lifespan
-  /// (alpha * first-touch time + margin steps) has run out.
+  /// ((1 + alpha) * t_min of its first distance + margin steps; see docs/algorithm.md) has run out.
   kPaper,
   /// Default: vector propagation until nothing changes (no lifespan cut-off), offers admitted in distance slices
   /// when there are many sites, plus (EngineOptions::second_ring) a correction at Voronoi boundaries that also
