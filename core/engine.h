@@ -4,9 +4,10 @@
 //   grid and hands every finished segment's bricks to `on_segment`, nearest first, on the calling thread.
 //   * Segment i delivers the voxels whose |distance| lies in (i*L, (i+1)*L] (segment 0 includes 0), L =
 //     options.segment_length (0: one segment up to the limit). Every voxel reached with |distance| <= limit is
-//     delivered exactly once, in the segment its final value falls in (in rare cases a voxel's closest site reaches
-//     it only after its segment: it is then delivered, with its better value, in the next one). Nothing beyond the
-//     limit is delivered; the engine computes at most one voxel beyond it (the admission slack).
+//     delivered exactly once, in the segment its value falls in; values delivered in a segment are final. (Rarely
+//     a voxel is first reached only in a later segment, with a value below that segment's lower bound: it is
+//     delivered there.) Nothing beyond the limit is delivered; the engine computes at most one voxel beyond it
+//     (the admission slack).
 //   * Bricks of a segment are sorted by origin (z, y, x); each brick's mask marks the voxels it delivers.
 //   * Storage is sparse: 8^3 bricks allocated when first touched, so memory follows the voxels inside the limit.
 //   * Compute runs on TBB. With options.threads > 0 it runs in a task_arena of that size, otherwise in the
