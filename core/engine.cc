@@ -612,50 +612,52 @@ void BandRun::checkVoxel(const VoxelRef& v, const Coord& q, uint64_t k, uint64_t
 //   * the first round of a segment checks every voxel of the segment at a site boundary (scanCandidates);
 //   * later rounds check only boundary voxels within distance 2 of a voxel changed since the last round.
 std::vector<FrontEntry> BandRun::correct(bool first_round) {
-  std::vector<VoxelRef> candidates;
   if (first_round) {
     collectPending();
     scanAndCheck();
   } else {
+    std::vector<VoxelRef> dirty;
     for (auto& tb : buffers_) {
-      for (const VoxelRef& d : tb.dirty) {
-        BrickState* db = table_[d.brick].load(std::memory_order_relaxed);
-        db->flags[d.offset].fetch_and(uint8_t(~kDirty), std::memory_order_relaxed);
-        const Coord c = db->origin + brickLocal(d.offset);
-        for (int dz = -2; dz <= 2; ++dz)
-          for (int dy = -2; dy <= 2; ++dy)
-            for (int dx = -2; dx <= 2; ++dx) {
-              const Coord q{c.x + dx, c.y + dy, c.z + dz};
-              if (!grid_.contains(q)) continue;
-              const uint32_t bi = brickIndex(q.x, q.y, q.z);
-              BrickState* b = table_[bi].load(std::memory_order_relaxed);
-              if (!b) continue;
-              const int off = brickOffset(q.x & 7, q.y & 7, q.z & 7);
-              if (b->key[off].load(std::memory_order_relaxed) == kUntouched) continue;
-              const uint8_t f = b->flags[off].load(std::memory_order_relaxed);
-              if (f & kQueued) continue;
-              b->flags[off].store(f | kQueued, std::memory_order_relaxed);
-              candidates.push_back({bi, uint16_t(off)});
-            }
-      }
+      dirty.insert(dirty.end(), tb.dirty.begin(), tb.dirty.end());
       tb.dirty.clear();
     }
-    for (const VoxelRef& v : candidates)
-      table_[v.brick].load(std::memory_order_relaxed)->flags[v.offset].fetch_and(uint8_t(~kQueued),
+    // Visits the touched voxels within distance 2 of every changed voxel (each changed voxel once).
+    auto aroundDirty = [&](auto&& visit) {
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, dirty.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+          const BrickState* db = table_[dirty[i].brick].load(std::memory_order_relaxed);
+          const Coord c = db->origin + brickLocal(dirty[i].offset);
+          for (int dz = -2; dz <= 2; ++dz)
+            for (int dy = -2; dy <= 2; ++dy)
+              for (int dx = -2; dx <= 2; ++dx) {
+                const Coord q{c.x + dx, c.y + dy, c.z + dz};
+                if (!grid_.contains(q)) continue;
+                const uint32_t bi = brickIndex(q.x, q.y, q.z);
+                BrickState* b = table_[bi].load(std::memory_order_relaxed);
+                if (!b) continue;
+                const int off = brickOffset(q.x & 7, q.y & 7, q.z & 7);
+                if (b->key[off].load(std::memory_order_relaxed) != kUntouched) visit(b, bi, off, q);
+              }
+        }
+      });
+    };
+    for (const VoxelRef& d : dirty)
+      table_[d.brick].load(std::memory_order_relaxed)->flags[d.offset].fetch_and(uint8_t(~kDirty),
                                                                                  std::memory_order_relaxed);
+    // Check each candidate once, as it is claimed (kQueued), without listing them: corrections are only recorded
+    // here and applied after the round, so which thread checks a voxel does not matter.
+    aroundDirty([&](BrickState* b, uint32_t bi, int off, const Coord& q) {
+      if (b->flags[off].fetch_or(kQueued, std::memory_order_relaxed) & kQueued) return;
+      const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+      if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey || !isBoundary(q, k)) return;
+      uint64_t block[125];
+      checkVoxel({bi, uint16_t(off)}, q, k, block, buffers_.local());
+    });
+    aroundDirty([&](BrickState* b, uint32_t, int off, const Coord&) {
+      if (b->flags[off].load(std::memory_order_relaxed) & kQueued)
+        b->flags[off].fetch_and(uint8_t(~kQueued), std::memory_order_relaxed);
+    });
   }
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
-    ThreadBuffers& tb = buffers_.local();
-    uint64_t block[125];  // keys of the 5^3 block around the voxel, kUntouched where nothing usable
-    for (size_t i = r.begin(); i != r.end(); ++i) {
-      const VoxelRef v = candidates[i];
-      BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
-      const uint64_t k = b->key[v.offset].load(std::memory_order_relaxed);
-      if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey) continue;
-      const Coord q = b->origin + brickLocal(v.offset);
-      if (isBoundary(q, k)) checkVoxel(v, q, k, block, tb);
-    }
-  });
   std::vector<FrontEntry> front;
   for (auto& tb : buffers_) {
     for (const auto& [v, key] : tb.corrections) {
