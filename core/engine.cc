@@ -19,6 +19,8 @@
 #include <optional>
 #include <stdexcept>
 
+#include <malloc.h>
+
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -289,6 +291,7 @@ class BandRun {
   void gatherBlock(const Coord& q, uint64_t* block) const;
   bool emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats);
   void rearmLifespans();
+  void releaseBricks();
   void collectPending();
 
   const Grid& grid_;
@@ -724,6 +727,16 @@ void BandRun::gatherBlock(const Coord& q, uint64_t* block) const {
     }
 }
 
+// After the last segment's bricks are built nothing reads the band again: free it before the consumer builds its
+// output, so the two never peak together, and hand the pages back (freed by the worker threads' malloc arenas,
+// they would otherwise stay in this process).
+void BandRun::releaseBricks() {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, table_.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) delete table_[i].exchange(nullptr, std::memory_order_relaxed);
+  });
+  ::malloc_trim(0);
+}
+
 // Merges the bricks that got their first unemitted voxel into pending_bricks_, kept sorted by brick index.
 void BandRun::collectPending() {
   for (auto& tb : buffers_) {
@@ -772,6 +785,9 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
   });
   uint32_t count = 0;
   for (uint32_t& s : slot) s = s ? ++count : 0;
+  bool waiting = false;
+  for (uint8_t kept : keep) waiting |= kept != 0;
+  const bool last = thr_is_limit_ || (nothing_deferred && !waiting);
   SegmentBricks seg;
   seg.bricks.resize(count);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
@@ -798,9 +814,7 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
       if (seeds_.sign) seeds_.sign(brick, sites);
     }
   });
-  bool waiting = false;
-  for (uint8_t kept : keep) waiting |= kept != 0;
-  const bool last = thr_is_limit_ || (nothing_deferred && !waiting);
+  if (last) releaseBricks();
   seg.index = index;
   seg.lower_world = lower_vox * h;
   seg.upper_world = upper_vox * h;
