@@ -385,11 +385,16 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   // Point sites: the offset from the site to p, so a neighbour's squared distance is three multiply-adds.
   Vec3d rel{};
   if constexpr (kPoints) rel = Vec3d{double(p.x), double(p.y), double(p.z)} - seeds_.points[site];
-  // Triangle sites: one precomputed triangle for every neighbour.
+  // Triangle sites: one precomputed triangle for every neighbour, and its plane (a lower bound, below).
   std::optional<TriangleDistance> tri;
+  Vec3d plane_point{}, unit_normal{};
   if constexpr (!kPoints) {
     const auto& t = seeds_.triangles[site];
     tri.emplace(t[0], t[1], t[2]);
+    const Vec3d n = (t[1] - t[0]).cross(t[2] - t[0]);
+    const double len2 = n.lengthSqr();
+    plane_point = t[0];
+    unit_normal = len2 > 0 ? n * (1.0 / std::sqrt(len2)) : Vec3d{};  // degenerate: bound 0, never rejects
   }
   // Only a brick reaching past the grid's far faces needs per-voxel bounds checks (the near faces are brick
   // faces, handled by the neighbouring-brick lookup).
@@ -431,7 +436,8 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
       const Vec3d g{double(p.x + d.x), double(p.y + d.y), double(p.z + d.z)};
       // The plane's distance bounds the triangle's from below: an offer it already shows to be worse is
       // rejected without the full test (float rounding is monotone, so the outcome is the same).
-      if (k != kUntouched && float(tri->planeDist2(g)) > keyDist2(k)) continue;
+      const double plane = unit_normal.dot(g - plane_point);
+      if (k != kUntouched && float(plane * plane) > keyDist2(k)) continue;
       d2 = float(tri->dist2(g));
     }
     const uint64_t newkey = packKey(d2, d.dir, site);
@@ -507,26 +513,8 @@ bool BandRun::isBoundary(const Coord& q, uint64_t k) const {
 void BandRun::scanAndCheck() {
   const size_t n = pending_bricks_.size();
   constexpr uint32_t kMixed = ~uint32_t(0), kEmpty = ~uint32_t(0) - 1;
-  std::vector<uint32_t> uniform(n);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i != r.end(); ++i) {
-      BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
-      uint32_t u = kEmpty;
-      for (int off = 0; off < kBrickVoxels && u != kMixed; ++off) {
-        const uint64_t k = b->key[off].load(std::memory_order_relaxed);
-        if (k == kUntouched) continue;
-        u = (u == kEmpty || u == keySite(k)) ? keySite(k) : kMixed;
-      }
-      uniform[i] = u;
-    }
-  });
-  // Uniform site of any brick by index (pending or not): non-pending bricks are scanned on demand.
-  auto uniformOf = [&](uint32_t bi, size_t hint) -> uint32_t {
-    if (hint < n && pending_bricks_[hint] == bi) return uniform[hint];
-    const auto it = std::lower_bound(pending_bricks_.begin(), pending_bricks_.end(), bi);
-    if (it != pending_bricks_.end() && *it == bi) return uniform[size_t(it - pending_bricks_.begin())];
-    BrickState* b = table_[bi].load(std::memory_order_relaxed);
-    if (!b) return kEmpty;
+  // The one site all touched voxels of a brick hold, kMixed if they differ, kEmpty if none is touched.
+  auto uniformSite = [&](const BrickState* b) {
     uint32_t u = kEmpty;
     for (int off = 0; off < kBrickVoxels && u != kMixed; ++off) {
       const uint64_t k = b->key[off].load(std::memory_order_relaxed);
@@ -535,28 +523,38 @@ void BandRun::scanAndCheck() {
     }
     return u;
   };
+  std::vector<uint32_t> uniform(n);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) uniform[i] = uniformSite(table_[pending_bricks_[i]].load(std::memory_order_relaxed));
+  });
+  // Of any brick by index: pending bricks from the table above, the others (all delivered) scanned on demand.
+  auto uniformOf = [&](uint32_t bi) -> uint32_t {
+    const auto it = std::lower_bound(pending_bricks_.begin(), pending_bricks_.end(), bi);
+    if (it != pending_bricks_.end() && *it == bi) return uniform[size_t(it - pending_bricks_.begin())];
+    const BrickState* b = table_[bi].load(std::memory_order_relaxed);
+    return b ? uniformSite(b) : kEmpty;
+  };
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
     ThreadBuffers& tb = buffers_.local();
     uint64_t block[125];
     for (size_t i = r.begin(); i != r.end(); ++i) {
       const uint32_t bi = pending_bricks_[i];
       BrickState* b = table_[bi].load(std::memory_order_relaxed);
+      const Coord bc{b->origin.x >> kBrickLog2, b->origin.y >> kBrickLog2, b->origin.z >> kBrickLog2};
       if (uniform[i] != kMixed && !region_) {
         bool all_same = true;
-        const Coord bc{b->origin.x >> kBrickLog2, b->origin.y >> kBrickLog2, b->origin.z >> kBrickLog2};
         for (int dz = -1; dz <= 1 && all_same; ++dz)
           for (int dy = -1; dy <= 1 && all_same; ++dy)
             for (int dx = -1; dx <= 1 && all_same; ++dx) {
               const int x = bc.x + dx, y = bc.y + dy, z = bc.z + dz;
               if (x < 0 || y < 0 || z < 0 || x >= bdims_.x || y >= bdims_.y || z >= bdims_.z) continue;
-              const uint32_t u = uniformOf(uint32_t((size_t(z) * bdims_.y + y) * bdims_.x + x), n);
+              const uint32_t u = uniformOf(uint32_t((size_t(z) * bdims_.y + y) * bdims_.x + x));
               all_same = u == kEmpty || u == uniform[i];
             }
         if (all_same) continue;
       }
       // The 27 bricks around this one (null outside the grid or untouched), for the per-voxel test.
       BrickState* nbr[27];
-      const Coord bc{b->origin.x >> kBrickLog2, b->origin.y >> kBrickLog2, b->origin.z >> kBrickLog2};
       for (int j = 0; j < 27; ++j) {
         const int x = bc.x + j % 3 - 1, y = bc.y + (j / 3) % 3 - 1, z = bc.z + j / 9 - 1;
         nbr[j] = (x < 0 || y < 0 || z < 0 || x >= bdims_.x || y >= bdims_.y || z >= bdims_.z)

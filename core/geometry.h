@@ -2,8 +2,6 @@
 // Contract: pure functions, double precision, no allocation; thread-safe.
 #pragma once
 
-#include <cmath>
-
 #include "core/types.h"
 
 namespace distband {
@@ -22,17 +20,7 @@ inline double pointTriangleDistanceSqr(const Vec3d& p, const Vec3d& a, const Vec
 class TriangleDistance {
  public:
   TriangleDistance(const Vec3d& a, const Vec3d& b, const Vec3d& c)
-      : a_(a), b_(b), c_(c), ab_(b - a), ac_(c - a), abab_(ab_.dot(ab_)), acac_(ac_.dot(ac_)), abac_(ab_.dot(ac_)) {
-    const Vec3d n = ab_.cross(ac_);
-    const double len2 = n.lengthSqr();
-    unit_normal_ = len2 > 0 ? n * (1.0 / std::sqrt(len2)) : Vec3d{};
-  }
-
-  /// A lower bound of dist2(p): the squared distance to the triangle's plane (0 for a degenerate triangle).
-  double planeDist2(const Vec3d& p) const {
-    const double d = unit_normal_.dot(p - a_);
-    return d * d;
-  }
+      : a_(a), b_(b), c_(c), ab_(b - a), ac_(c - a), abab_(ab_.dot(ab_)), acac_(ac_.dot(ac_)), abac_(ab_.dot(ac_)) {}
 
   double dist2(const Vec3d& p) const {
     const Vec3d ap = p - a_;
@@ -59,7 +47,6 @@ class TriangleDistance {
  private:
   Vec3d a_, b_, c_, ab_, ac_;
   double abab_, acac_, abac_;
-  Vec3d unit_normal_;
 };
 
 }  // namespace distband
