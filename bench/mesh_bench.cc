@@ -80,7 +80,7 @@ struct Options {
   std::string stencil = "cubic26";
   std::string run_case;
   PropagationMode feature_engine = PropagationMode::kExact;  ///< engine mode of the exact-feature rows
-  bool second_ring = false;  ///< exact-feature rows: run the engine's second-ring correction (the product does not)
+  bool second_ring = false;  ///< exact-feature rows: force the engine's second-ring correction on (default: off)
   std::string memory_mesh = "armadillo.off";
   int memory_resolution = 1024;
   int memory_half_width = 3;
@@ -210,7 +210,7 @@ DistbandRun runDistband(const Grid& grid, const MeshInput& in, MeshSiteMode mode
   eo.limit_world = limit_vox * grid.voxelSize();
   eo.segment_length_world = segment_vox * grid.voxelSize();
   eo.threads = o.threads;
-  eo.second_ring = o.second_ring;  // as distband compute and the server run meshes
+  if (o.second_ring) eo.second_ring = true;  // otherwise the engine's default for triangle sites (off), as the product
   double consume_s = 0;
   run.result = computeDistanceField(grid, seeds, eo, [&](SegmentBricks&& s) {
     const auto tc = Clock::now();

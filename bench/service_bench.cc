@@ -247,7 +247,6 @@ int main(int argc, char** argv) {
       mo.resolution = resolution;
       gridForMesh(mesh, mo, &c.grid);
       c.options.segment_length_world = segment_voxels * c.grid.voxelSize();
-      c.options.second_ring = false;  // as the server runs mesh queries
       c.request.set_asset_id(mesh_id);
       c.request.mutable_grid()->set_resolution(uint32_t(resolution));
       c.request.set_segment_length(c.options.segment_length_world);
@@ -305,7 +304,6 @@ int main(int argc, char** argv) {
       MeshGridOptions mo;
       mo.resolution = load_resolution;
       gridForMesh(mesh, mo, &ref_case.grid);
-      ref_case.options.second_ring = false;  // as the server runs mesh queries
     } else {
       ref_case.grid = Grid({0, 0, 0}, 1.0, {load_resolution, load_resolution, load_resolution});
       const Vec3d p{load_resolution * 0.5, load_resolution * 0.5, load_resolution * 0.5};

@@ -198,7 +198,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   // ~0.01 voxel, so it is opt-in (--second-ring).
   if (!a.mesh.empty()) {
     options.mode = a.mode == "paper" ? PropagationMode::kPaper : PropagationMode::kExact;
-    options.second_ring = a.second_ring;
+    if (a.second_ring) options.second_ring = true;  // otherwise the engine's default for triangle sites: off
   }
   options.segment_length_world = a.segment;
   options.limit_world = a.limit;

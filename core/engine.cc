@@ -831,7 +831,7 @@ EngineResult BandRun::run() {
   using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
   EngineResult result;
-  correcting_ = opt_.mode == PropagationMode::kExact && opt_.second_ring;
+  correcting_ = opt_.mode == PropagationMode::kExact && opt_.second_ring.value_or(seeds_.kind == SiteKind::kPoint);
 
   const bool segmented = segment_vox_ > 0;
   auto upperOf = [&](int i) {

@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -51,9 +52,9 @@ struct EngineOptions {
   double segment_length_world = 0;                                    ///< 0: a single segment
   double limit_world = std::numeric_limits<double>::infinity();        ///< distance limit (world units)
   int threads = 0;                                                     ///< 0: the caller's TBB arena
-  /// Exact mode: run the second-ring correction at the end of each segment. It makes point and volume seeds exact;
-  /// on triangle sites it costs several times the propagation for ~0.01 voxel, so mesh callers turn it off.
-  bool second_ring = true;
+  /// Exact mode: run the second-ring correction at the end of each segment. Unset: on for point sites (it makes point
+  /// and volume seeds exact), off for triangle sites (there it costs several times the propagation for ~0.01 voxel).
+  std::optional<bool> second_ring;
   /// Paper mode only: lifespan = ceil(alpha * t_first) + margin steps. alpha < 0 uses the stencil's
   /// value; +infinity disables the lifespan (iterate until nothing changes). margin < 0 uses the default.
   double lifespan_alpha = -1;

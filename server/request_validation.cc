@@ -160,9 +160,6 @@ grpc::Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& option
     case v1::BRICK_ENCODING_FLOAT16: q.encoding = v1::BRICK_ENCODING_FLOAT16; break;
     default: return invalid(fmt::format("encoding must be a BrickEncoding value 0..2 (got {})", int(r.encoding())));
   }
-  // Triangle sites: the second-ring correction costs several times the propagation for ~0.01 voxel (see
-  // docs/algorithm.md), so mesh queries run exact mode without it.
-  if (q.seed_kind == ResolvedQuery::SeedKind::kMesh) q.engine.second_ring = false;
   const v1::SignMode sign = r.sign();
   if (sign < v1::SIGN_MODE_UNSPECIFIED || sign > v1::SIGN_MODE_MASK_INSIDE)
     return invalid(fmt::format("sign must be a SignMode value 0..5 (got {})", int(sign)));

@@ -294,7 +294,6 @@ TEST(ServiceTest, MeshUploadInChunksAndQueryMatchInProcess) {
   EngineOptions o;
   o.segment_length_world = 0.1;
   o.limit_world = 0.35;
-  o.second_ring = false;  // mesh queries run exact mode without the second-ring correction
   expectBitIdentical(*s.field, reference(grid, seeds, o, 0.35f));
   // The centre of the cube is inside: its value must be negative (-limit background or a distance).
   bool any_negative = false;
