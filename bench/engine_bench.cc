@@ -54,6 +54,7 @@
 #include "core/stencil.h"
 
 #include "bench/bench_util.h"
+#include "tests/support/exact_edt.h"
 
 #ifndef DISTBAND_BENCH_DIR
 #define DISTBAND_BENCH_DIR "bench"
@@ -214,71 +215,12 @@ Seeds sphereBandSeeds(int n, const Sphere& s) {
 // ---------------------------------------------------------------------------------------------------------
 // Oracles (no code shared with the engine).
 
-/// Squared distance along one line to the lower envelope of parabolas (Felzenszwalb & Huttenlocher 2012).
-void envelope1d(const double* f, int n, double* out, int* v, double* zb) {
-  int k = -1;
-  for (int q = 0; q < n; ++q) {
-    if (!std::isfinite(f[q])) continue;
-    if (k < 0) {
-      k = 0;
-      v[0] = q;
-      zb[0] = -kInf;
-      zb[1] = kInf;
-      continue;
-    }
-    double s;
-    for (;;) {
-      s = ((f[q] + double(q) * q) - (f[v[k]] + double(v[k]) * v[k])) / (2.0 * (q - v[k]));
-      if (s <= zb[k] && k > 0) {
-        --k;
-      } else {
-        break;
-      }
-    }
-    if (s <= zb[k]) {  // k == 0 and the new parabola hides the first one everywhere
-      v[0] = q;
-      zb[0] = -kInf;
-      zb[1] = kInf;
-      continue;
-    }
-    ++k;
-    v[k] = q;
-    zb[k] = s;
-    zb[k + 1] = kInf;
-  }
-  if (k < 0) {
-    for (int q = 0; q < n; ++q) out[q] = kInf;
-    return;
-  }
-  int j = 0;
-  for (int q = 0; q < n; ++q) {
-    while (zb[j + 1] < q) ++j;
-    const double d = q - v[j];
-    out[q] = d * d + f[v[j]];
-  }
-}
-
-/// Exact Euclidean distance of every voxel of an n^3 box to the nearest nonzero mask voxel (x-fastest).
+/// Exact Euclidean distance of every voxel of an n^3 box to the nearest nonzero mask voxel (x-fastest): the
+/// test suite's exact EDT (tests/support/exact_edt.h), which shares no code with the engine.
 std::vector<double> exactEdt(const std::vector<uint8_t>& mask, int n) {
-  std::vector<double> g(mask.size());
-  for (size_t i = 0; i < mask.size(); ++i) g[i] = mask[i] ? 0.0 : kInf;
-  const int64_t stride[3] = {1, n, int64_t(n) * n};
-  for (int axis = 0; axis < 3; ++axis) {
-    // Lines along `axis`, indexed by the other two coordinates (a, b).
-    const int64_t sa = stride[(axis + 1) % 3], sb = stride[(axis + 2) % 3], s = stride[axis];
-    tbb::parallel_for(0, n, [&](int b) {
-      std::vector<double> f(n), out(n), zb(n + 1);
-      std::vector<int> v(n);
-      for (int a = 0; a < n; ++a) {
-        const int64_t base = a * sa + b * sb;
-        for (int q = 0; q < n; ++q) f[q] = g[base + q * s];
-        envelope1d(f.data(), n, out.data(), v.data(), zb.data());
-        for (int q = 0; q < n; ++q) g[base + q * s] = out[q];
-      }
-    });
-  }
-  for (double& d : g) d = std::sqrt(d);
-  return g;
+  std::vector<double> d = oracle::edtSqr(n, n, n, mask);
+  for (double& v : d) v = std::sqrt(v);
+  return d;
 }
 
 /// Exact distance from voxel q to the nearest of `points`, searching the sites within `radius` through a
