@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "core/seeds/point_seeds.h"
@@ -306,43 +307,35 @@ TEST(OracleSelfCheck, ExactEdtAgreesWithBruteForce) {
   EXPECT_TRUE(std::isinf(oracle::edtSqr(4, 4, 4, std::vector<uint8_t>(64, 0))[0]));
 }
 
-TEST(EngineExactness, PointSeedsAgainstBruteForce) {
-  for (const PointCase& pc : pointCases(64)) {
-    const std::vector<double> expected = pointOracleVox(pc.grid, pc.world_points);
-    const Seeds seeds = pointSeeds(pc.grid, pc.world_points);
-    for (PropagationMode mode : kAllModes)
-      for (StencilKind stencil : kAllStencils) {
-        const std::string what = pc.name + " 64^3 " + label(stencil, mode);
-        const EngineRun run = runEngine(pc.grid, seeds, makeOptions(stencil, mode));
-        expectCleanDelivery(run, what);
-        expectAllDelivered(run, what);
-        const ErrorStats s = oracle::compareToOracle(run.field, expected, pc.grid.voxelSize());
-        report(what, pc.grid, s, run.seconds);
-        if (mode == PropagationMode::kExact && (stencil == StencilKind::kCubic26 || stencil == StencilKind::kFcc12)) {
-          EXPECT_LE(s.max_err_vox, 1e-5) << what << ": " << oracle::formatErrorStats(s, 64, 64);
-        }
-      }
-  }
-}
-
-TEST(EngineExactness, PointSeedsInWorldUnits) {
-  // Non-unit voxel size and a shifted origin: distances are world units.
-  const Grid grid({-2.0, 1.0, 0.5}, 0.25, {40, 36, 44});
-  const std::vector<Vec3d> pts{{1.13, 5.02, 6.31}, {5.7, 3.3, 4.4}, {0.2, 8.9, 10.1}};
-  const std::vector<double> expected = pointOracleVox(grid, pts);
-  const Seeds seeds = pointSeeds(grid, pts);
+/// Every mode and stencil on one point set, against brute force: everything delivered once, figures reported, and
+/// exact mode with cubic26 and fcc12 exact (<= 1e-5 voxel).
+void checkPointExactness(const std::string& name, const Grid& grid, const std::vector<Vec3d>& world_points) {
+  const std::vector<double> expected = pointOracleVox(grid, world_points);
+  const Seeds seeds = pointSeeds(grid, world_points);
+  const Coord d = grid.dims();
   for (PropagationMode mode : kAllModes)
     for (StencilKind stencil : kAllStencils) {
-      const std::string what = "world_units 40x36x44 h=0.25 " + label(stencil, mode);
+      const std::string what = fmt::format("{} {}x{}x{} h={} {}", name, d.x, d.y, d.z, grid.voxelSize(),
+                                           label(stencil, mode));
       const EngineRun run = runEngine(grid, seeds, makeOptions(stencil, mode));
       expectCleanDelivery(run, what);
       expectAllDelivered(run, what);
       const ErrorStats s = oracle::compareToOracle(run.field, expected, grid.voxelSize());
       report(what, grid, s, run.seconds);
       if (mode == PropagationMode::kExact && (stencil == StencilKind::kCubic26 || stencil == StencilKind::kFcc12)) {
-        EXPECT_LE(s.max_err_vox, 1e-5) << what;
+        EXPECT_LE(s.max_err_vox, 1e-5) << what << ": " << oracle::formatErrorStats(s, d.x, d.y);
       }
     }
+}
+
+TEST(EngineExactness, PointSeedsAgainstBruteForce) {
+  for (const PointCase& pc : pointCases(64)) checkPointExactness(pc.name, pc.grid, pc.world_points);
+}
+
+TEST(EngineExactness, PointSeedsInWorldUnits) {
+  // Non-unit voxel size and a shifted origin: distances are world units.
+  checkPointExactness("world_units", Grid({-2.0, 1.0, 0.5}, 0.25, {40, 36, 44}),
+                      {{1.13, 5.02, 6.31}, {5.7, 3.3, 4.4}, {0.2, 8.9, 10.1}});
 }
 
 /// Two points inside the grid and one outside it (its band is the clamped block near the grid's edge).
@@ -353,20 +346,7 @@ PointCase outsideCase() {
 
 TEST(EngineExactness, PointSeedsOutsideTheGrid) {
   const PointCase pc = outsideCase();
-  const std::vector<double> expected = pointOracleVox(pc.grid, pc.world_points);
-  const Seeds seeds = pointSeeds(pc.grid, pc.world_points);
-  for (PropagationMode mode : kAllModes)
-    for (StencilKind stencil : kAllStencils) {
-      const std::string what = pc.name + " 40x36x44 h=0.25 " + label(stencil, mode);
-      const EngineRun run = runEngine(pc.grid, seeds, makeOptions(stencil, mode));
-      expectCleanDelivery(run, what);
-      expectAllDelivered(run, what);
-      const ErrorStats s = oracle::compareToOracle(run.field, expected, pc.grid.voxelSize());
-      report(what, pc.grid, s, run.seconds);
-      if (mode == PropagationMode::kExact && (stencil == StencilKind::kCubic26 || stencil == StencilKind::kFcc12)) {
-        EXPECT_LE(s.max_err_vox, 1e-5) << what;
-      }
-    }
+  checkPointExactness(pc.name, pc.grid, pc.world_points);
 }
 
 void checkVolumeExactness(bool signed_distance) {
