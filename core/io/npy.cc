@@ -208,6 +208,17 @@ std::string writeNpyFile(const std::string& path, std::string_view descr, const 
   return {};
 }
 
+/// "" when the data after the header is exactly what the shape and dtype need, otherwise what is wrong.
+std::string checkPayloadSize(std::string_view name, const NpyArray& a, uint64_t payload, uint64_t have) {
+  if (have < payload)
+    return fmt::format("{}: truncated: shape {} of '{}' needs {} data bytes, the file holds {}", name,
+                       shapeText(a.shape), a.descr, payload, have);
+  if (have > payload)
+    return fmt::format("{}: {} unexpected bytes after the {} data bytes of shape {}", name, have - payload, payload,
+                       shapeText(a.shape));
+  return {};
+}
+
 }  // namespace
 
 std::string parseNpy(std::string_view bytes, std::string_view name, NpyArray* out) {
@@ -221,12 +232,7 @@ std::string parseNpy(std::string_view bytes, std::string_view name, NpyArray* ou
   err = parseHeader(bytes.substr(start, len), name, &a, &payload);
   if (!err.empty()) return err;
   const uint64_t have = bytes.size() - start - len;
-  if (have < payload)
-    return fmt::format("{}: truncated: shape {} of '{}' needs {} data bytes, the file holds {}", name,
-                       shapeText(a.shape), a.descr, payload, have);
-  if (have > payload)
-    return fmt::format("{}: {} unexpected bytes after the {} data bytes of shape {}", name, have - payload, payload,
-                       shapeText(a.shape));
+  if (std::string e = checkPayloadSize(name, a, payload, have); !e.empty()) return e;
   const auto* p = reinterpret_cast<const uint8_t*>(bytes.data()) + start + len;
   a.data.assign(p, p + payload);
   *out = std::move(a);
@@ -259,12 +265,7 @@ std::string readNpy(const std::string& path, NpyArray* out) {
   err = parseHeader(header, path, &a, &payload);
   if (!err.empty()) return err;
   const uint64_t have = uint64_t(file_size) - start - len;
-  if (have < payload)
-    return fmt::format("{}: truncated: shape {} of '{}' needs {} data bytes, the file holds {}", path,
-                       shapeText(a.shape), a.descr, payload, have);
-  if (have > payload)
-    return fmt::format("{}: {} unexpected bytes after the {} data bytes of shape {}", path, have - payload, payload,
-                       shapeText(a.shape));
+  if (std::string e = checkPayloadSize(path, a, payload, have); !e.empty()) return e;
   a.data.resize(payload);
   f.read(reinterpret_cast<char*>(a.data.data()), static_cast<std::streamsize>(payload));
   if (!f) return fmt::format("{}: read failed while loading {} data bytes", path, payload);
