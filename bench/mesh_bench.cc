@@ -403,6 +403,9 @@ json memoryCase(const Options& o) {
     row["seeds_s"] = run.seeds_s;
     row["band_voxels"] = run.band_voxels;
     row["active_voxels"] = builder.activeVoxels();
+    row["engine_s"] = run.engine_s;
+    row["updates"] = run.result.updates;
+    row["steps"] = run.result.steps;
   } else if (o.run_case == "memory-distband-discard") {  // same run, output dropped: the engine's own footprint
     DistbandRun run = runDistband(grid, in, MeshSiteMode::kExactFeature, o.memory_half_width, 0, o,
                                   [&](SegmentBricks&) {});

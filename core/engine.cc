@@ -82,6 +82,8 @@ constexpr uint32_t kSiteMask = (1u << kSiteBits) - 1;
 constexpr uint32_t kNoSiteKey = kSiteMask;  // kNoSite in the key
 constexpr uint32_t kMaxSites = kSiteMask;   // site ids must stay below this
 constexpr uint32_t kNoDirection = 31;
+// Band voxels of a Seeds::band_exact band hold their closest site: they offer like kNoDirection but take no offers.
+constexpr uint32_t kExactDir = 30;
 
 inline uint64_t packKey(float d2, uint32_t dir, uint32_t site) {
   return (uint64_t(std::bit_cast<uint32_t>(d2)) << 32) | (uint64_t(site) << 5) | dir;
@@ -124,9 +126,13 @@ struct BrickState {
   }
   Coord origin;
   std::atomic<bool> pending{false};  // listed for emission (holds touched, not yet emitted voxels)
-  std::atomic<uint64_t> key[kBrickVoxels];
+  alignas(64) std::atomic<uint64_t> key[kBrickVoxels];  // one cache line per (x, y) row
   std::atomic<uint8_t> listed[kBrickVoxels];  // already in the next front
   std::atomic<uint8_t> flags[kBrickVoxels];
+  // Bit i: voxel i is a band voxel of a Seeds::band_exact band (set before the first step, then only read). One
+  // cache line, tested before the voxel's key is loaded.
+  std::atomic<uint64_t> exact[kBrickVoxels / 64] = {};
+  bool isExact(int off) const { return (exact[off >> 6].load(std::memory_order_relaxed) >> (off & 63)) & 1; }
   std::unique_ptr<std::atomic<uint16_t>[]> expiry;  // paper mode: last step in which a voxel accepts offers
 };
 
@@ -346,11 +352,11 @@ void BandRun::buildLinkTables() {
   for (int c = 0; c < 27; ++c) {
     const Coord src{rep_local[c % 3], rep_local[(c / 3) % 3], rep_local[c / 9]};
     for (uint32_t dir = 0; dir < 32; ++dir) {
-      if (dir != kNoDirection && dir >= sl.size()) continue;
+      if (dir != kNoDirection && dir != kExactDir && dir >= sl.size()) continue;
       for (Link link : links_) {
         // The source received its site along link `dir` from Q = source - sl[dir], which offered the same site
         // to all of its own links one step earlier: a target that is one of them (or Q) gains nothing.
-        if (dir != kNoDirection) {
+        if (dir != kNoDirection && dir != kExactDir) {
           const Coord& u = sl[dir];
           if (isLinkOrZero({link.x + u.x, link.y + u.y, link.z + u.z})) continue;
         }
@@ -425,9 +431,10 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
       gb = table_[gbi].load(std::memory_order_acquire);
     }
     if (region_map && region_map[grid_.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
+    if (gb && gb->isExact(goff)) continue;
     const uint64_t k = gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched;
-    // The same site gives the same distance: nothing to offer.
-    if (k != kUntouched && keySite(k) == site) continue;
+    // The same site gives the same distance: nothing to offer; an exact band voxel takes nothing.
+    if (k != kUntouched && (keySite(k) == site || keyDir(k) == kExactDir)) continue;
     float d2;
     if constexpr (kPoints) {
       const double x = rel.x + d.fx, y = rel.y + d.fy, z = rel.z + d.fz;
@@ -469,6 +476,7 @@ void BandRun::insertBand() {
       throw std::invalid_argument(fmt::format("band voxel names site {} of {}", v.site, seeds_.siteCount()));
   }
   step_ = 0;
+  const uint32_t band_dir = seeds_.band_exact ? kExactDir : kNoDirection;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
     ThreadBuffers& tb = buffers_.local();
     for (size_t i = r.begin(); i != r.end(); ++i) {
@@ -480,7 +488,8 @@ void BandRun::insertBand() {
       BrickState* b = getOrCreate(bi, tb);
       const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
       // Band voxels are first touched at step 0; kNoSite voxels (distance 0, nothing to offer) never push.
-      offer(b, bi, off, packKey(d2, kNoDirection, site), site != kNoSiteKey, tb);
+      if (offer(b, bi, off, packKey(d2, band_dir, site), site != kNoSiteKey, tb) && seeds_.band_exact)
+        b->exact[off >> 6].fetch_or(uint64_t(1) << (off & 63), std::memory_order_relaxed);
     }
   });
 }
@@ -565,7 +574,9 @@ void BandRun::scanAndCheck() {
                         b->origin.z + kBrickSize > dims_.z;
       for (int off = 0; off < kBrickVoxels; ++off) {
         const uint64_t k = b->key[off].load(std::memory_order_relaxed);
-        if (k == kUntouched || keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey) continue;
+        if (k == kUntouched || keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey ||
+            keyDir(k) == kExactDir)
+          continue;
         if (b->flags[off].load(std::memory_order_relaxed) & kEmitted) continue;
         const Coord l = brickLocal(off);
         const Coord q = b->origin + l;
@@ -650,7 +661,9 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
     aroundDirty([&](BrickState* b, uint32_t bi, int off, const Coord& q) {
       if (b->flags[off].fetch_or(kQueued, std::memory_order_relaxed) & kQueued) return;
       const uint64_t k = b->key[off].load(std::memory_order_relaxed);
-      if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey || !isBoundary(q, k)) return;
+      if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey || keyDir(k) == kExactDir ||
+          !isBoundary(q, k))
+        return;
       uint64_t block[125];
       checkVoxel({bi, uint16_t(off)}, q, k, block, buffers_.local());
     });
@@ -788,6 +801,7 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
   const bool last = thr_is_limit_ || (nothing_deferred && !waiting);
   SegmentBricks seg;
   seg.bricks.resize(count);
+  const bool triangles = seeds_.kind == SiteKind::kTriangle;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
     uint32_t sites[kBrickVoxels];
     for (size_t i = r.begin(); i != r.end(); ++i) {
@@ -805,7 +819,10 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
         const Coord c = b->origin + brickLocal(off);
         const uint32_t s = keySite(k);
         sites[off] = s == kNoSiteKey ? kNoSite : s;
-        brick.values[off] = float(std::sqrt(metric_.dist2(s, c.x, c.y, c.z)) * h);
+        // Triangle sites: the key's float squared distance is the exact one rounded to 24 bits, so its root is within
+        // an ulp of the output's float (a second point–triangle test per voxel would buy nothing). Points are cheap.
+        const double d2 = triangles ? double(keyDist2(k)) : metric_.dist2(s, c.x, c.y, c.z);
+        brick.values[off] = float(std::sqrt(d2) * h);
         brick.mask.set(off);
         b->flags[off].store(f | kEmitted, std::memory_order_relaxed);
       }

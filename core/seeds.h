@@ -5,7 +5,7 @@
 //     sites are triangles (index space) and a voxel's distance to one is the exact point–triangle distance.
 //   * `band` lists the voxels the propagation starts from, each with its site; the engine computes their
 //     distances from the site itself. kNoSite marks a voxel whose distance is 0 and that offers nothing to its
-//     neighbours (the interior of a seed volume).
+//     neighbours (the interior of a seed volume). With `band_exact` the band's sites are final.
 //   * `region` (optional, dense x-fastest, one byte per voxel): propagation never crosses between voxels of
 //     different labels (used for signed seed volumes, where inside and outside have different site sets).
 //   * `sign` (optional): called on every delivered brick to turn unsigned distances into signed ones
@@ -39,6 +39,9 @@ struct Seeds {
   std::vector<Vec3d> points;                    ///< kPoint sites, index space
   std::vector<std::array<Vec3d, 3>> triangles;  ///< kTriangle sites, index space
   std::vector<BandVoxel> band;
+  /// True when every band voxel's site is already its closest site (mesh and volume seeds): the engine then
+  /// never offers anything to band voxels, which saves most of the work of thin bands.
+  bool band_exact = false;
   std::shared_ptr<const std::vector<uint8_t>> region;  ///< null, or grid.voxelCount() labels
   /// Signs the masked values of `brick` in place; `sites[i]` is the site of voxel offset i (kNoSite if none).
   std::function<void(Brick& brick, const uint32_t* sites)> sign;

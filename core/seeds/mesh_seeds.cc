@@ -175,6 +175,25 @@ struct MeshSigner {
       double r2;
       bool inside;
     };
+    // A voxel farther from the surface than the brick is wide (plus a margin for rounding) sees no surface inside
+    // the brick: one sign test then signs every voxel of it. Most bricks beyond a few voxels are like this.
+    constexpr double kBrickDiameter = 7 * 1.7320508075688772 + 0.5;
+    int far = -1;
+    for (int i = 0; i < kBrickVoxels && far < 0; ++i)
+      if (brick.mask.test(i) && std::abs(brick.values[i]) > kBrickDiameter * voxel_size &&
+          (method != SignMethod::kPseudonormal || sites[i] != kNoSite))
+        far = i;
+    if (far >= 0) {
+      const Coord c = brick.origin + brickLocal(far);
+      const Vec3d p{double(c.x), double(c.y), double(c.z)};
+      const bool inside = method == SignMethod::kPseudonormal ? insidePseudonormal(p, triangleOf(sites[far]))
+                          : method == SignMethod::kWinding    ? winding->query(p) > 0.5
+                                                              : parity->inside(p);
+      if (inside)
+        for (int i = 0; i < kBrickVoxels; ++i)
+          if (brick.mask.test(i)) brick.values[i] = -std::abs(brick.values[i]);
+      return;
+    }
     std::vector<Ball> balls;
     for (int i = 0; i < kBrickVoxels; ++i) {
       if (!brick.mask.test(i)) continue;
@@ -328,17 +347,31 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
       lo = {std::max(lo.x, borg.x), std::max(lo.y, borg.y), std::max(lo.z, borg.z)};
       hi = {std::min(hi.x, borg.x + 7), std::min(hi.y, borg.y + 7), std::min(hi.z, borg.z + 7)};
       const auto& tri = tris[t];
+      const TriangleDistance dist(tri[0], tri[1], tri[2]);
       const Vec3d n = normals[t];
-      for (int x = lo.x; x <= hi.x; ++x)
-        for (int y = lo.y; y <= hi.y; ++y)
-          for (int z = lo.z; z <= hi.z; ++z) {
-            const Vec3d p{double(x), double(y), double(z)};
-            const double plane = n.dot(p - tri[0]);
+      const double plane0 = n.dot(tri[0]);
+      const double bx0 = std::min({tri[0].x, tri[1].x, tri[2].x}), bx1 = std::max({tri[0].x, tri[1].x, tri[2].x});
+      const double by0 = std::min({tri[0].y, tri[1].y, tri[2].y}), by1 = std::max({tri[0].y, tri[1].y, tri[2].y});
+      const double bz0 = std::min({tri[0].z, tri[1].z, tri[2].z}), bz1 = std::max({tri[0].z, tri[1].z, tri[2].z});
+      for (int x = lo.x; x <= hi.x; ++x) {
+        const double ex = x < bx0 ? bx0 - x : (x > bx1 ? x - bx1 : 0.0);
+        for (int y = lo.y; y <= hi.y; ++y) {
+          // Only the z-run within the radius of the triangle's bounding box can hold band voxels.
+          const double ey = y < by0 ? by0 - y : (y > by1 ? y - by1 : 0.0);
+          const double rest = r2 - ex * ex - ey * ey;
+          if (rest < 0) continue;
+          const double reach = std::sqrt(rest);
+          const int z0 = std::max(lo.z, int(std::ceil(bz0 - reach))), z1 = std::min(hi.z, int(std::floor(bz1 + reach)));
+          const double row_plane = n.x * x + n.y * y - plane0;
+          for (int z = z0; z <= z1; ++z) {
+            const double plane = row_plane + n.z * z;
             const int o = brickOffset(x & 7, y & 7, z & 7);
             if (plane * plane > best[o]) continue;
-            const double d2 = pointTriangleDistanceSqr(p, tri[0], tri[1], tri[2]);
+            const double d2 = dist.dist2({double(x), double(y), double(z)});
             if (d2 < best[o] || (d2 == best[o] && t < best_t[o])) best[o] = d2, best_t[o] = t;
           }
+        }
+      }
     }
     auto& v = per_brick[b];
     for (int o = 0; o < kBrickVoxels; ++o)
@@ -349,6 +382,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   for (size_t b = 0; b < nbricks; ++b) band_at[b + 1] = band_at[b] + per_brick[b].size();
 
   Seeds seeds;
+  seeds.band_exact = true;  // each band voxel's closest triangle among all within the radius: its closest overall
   seeds.band.resize(band_at[nbricks]);
   tbb::parallel_for(size_t(0), nbricks, [&](size_t b) {
     std::copy(per_brick[b].begin(), per_brick[b].end(), seeds.band.begin() + band_at[b]);
