@@ -411,7 +411,17 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   uint32_t known = 1u << 13;  // bit i: nbr_index[i] valid; 13 is this brick
   nbr_index[13] = e.brick;
   const Coord bcoord{pb->origin.x >> kBrickLog2, pb->origin.y >> kBrickLog2, pb->origin.z >> kBrickLog2};
-  bool deferred = false;
+  // Phase 1 gathers every target's brick and key with independent loads, so their cache misses overlap; phase 2
+  // decides on them. Keys may change in between (other threads): offer() re-checks, and a stale key only costs a
+  // test that a fresh one would have skipped.
+  struct Target {
+    const Link* link;
+    BrickState* brick;
+    uint32_t brick_index;
+    uint64_t key;
+  };
+  Target targets[32];
+  int count = 0;
   for (const Link& d : linksFor(l, e.dir)) {
     if (edge && (uint32_t(p.x + d.x) >= dx || uint32_t(p.y + d.y) >= dy || uint32_t(p.z + d.z) >= dz)) continue;
     const int goff = e.offset + d.offset;
@@ -430,9 +440,16 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
       if (gbi == kOutsideGrid) continue;
       gb = table_[gbi].load(std::memory_order_acquire);
     }
-    if (region_map && region_map[grid_.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
     if (gb && gb->isExact(goff)) continue;
-    const uint64_t k = gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched;
+    if (region_map && region_map[grid_.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
+    targets[count++] = {&d, gb, gbi, gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched};
+  }
+  bool deferred = false;
+  for (int i = 0; i < count; ++i) {
+    const Link& d = *targets[i].link;
+    BrickState* gb = targets[i].brick;
+    const uint64_t k = targets[i].key;
+    const int goff = e.offset + d.offset;
     // The same site gives the same distance: nothing to offer; an exact band voxel takes nothing.
     if (k != kUntouched && (keySite(k) == site || keyDir(k) == kExactDir)) continue;
     float d2;
@@ -456,6 +473,7 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
       deferred |= defer;
       continue;
     }
+    const uint32_t gbi = targets[i].brick_index;
     if (!gb) gb = getOrCreate(gbi, tb);
     offer(gb, gbi, goff, newkey, d.propagates_to || stencil_.propagates({p.x + d.x, p.y + d.y, p.z + d.z}), tb);
   }
