@@ -233,7 +233,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   auto t_segment = Clock::now();
   EngineResult result;
   try {
-    result = computeDistanceField(in.grid, in.seeds, options, [&](SegmentBricks&& seg) {
+    result = computeDistanceField(in.grid, std::move(in.seeds), options, [&](SegmentBricks&& seg) {
       int64_t voxels = 0;
       for (const Brick& b : seg.bricks) voxels += b.mask.count();
       sink->add(seg);

@@ -20,6 +20,7 @@
 #include <stdexcept>
 
 #include <malloc.h>
+#include <sys/mman.h>
 
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
@@ -107,18 +108,23 @@ constexpr double kLimitSlackVoxels = 1.0;
 // volumes. With few sites there is little to gain and the replays would cost, so it starts at kBucketMinSites.
 constexpr double kBucketVoxels = 4.0;
 constexpr size_t kBucketMinSites = 256;
-constexpr uint8_t kEmitted = 2;
-constexpr uint8_t kDirty = 4;   // changed since the last correction round (listed in ThreadBuffers::dirty)
-constexpr uint8_t kQueued = 8;  // already a candidate of the current correction round
 
-// 10 bytes a voxel (12 with a lifespan): memory follows the touched bricks.
+/// One bit per voxel of a brick. set() and clear() are atomic read-modify-writes (other threads may set other bits
+/// of the same word); set() tells whether this call set the bit.
+struct VoxelBits {
+  std::atomic<uint64_t> words[kBrickVoxels / 64] = {};
+  bool test(int i) const { return (words[i >> 6].load(std::memory_order_relaxed) >> (i & 63)) & 1; }
+  bool set(int i) {
+    const uint64_t bit = uint64_t(1) << (i & 63);
+    return !(words[i >> 6].fetch_or(bit, std::memory_order_relaxed) & bit);
+  }
+  void clear(int i) { words[i >> 6].fetch_and(~(uint64_t(1) << (i & 63)), std::memory_order_relaxed); }
+};
+
+// 8 bytes and 5 bits a voxel (2 bytes more with a lifespan): memory follows the touched bricks.
 struct BrickState {
   BrickState(Coord o, bool with_lifespan) : origin(o) {
-    for (int i = 0; i < kBrickVoxels; ++i) {
-      key[i].store(kUntouched, std::memory_order_relaxed);
-      listed[i].store(0, std::memory_order_relaxed);
-      flags[i].store(0, std::memory_order_relaxed);
-    }
+    for (int i = 0; i < kBrickVoxels; ++i) key[i].store(kUntouched, std::memory_order_relaxed);
     if (with_lifespan) {
       expiry = std::make_unique<std::atomic<uint16_t>[]>(kBrickVoxels);
       for (int i = 0; i < kBrickVoxels; ++i) expiry[i].store(kNeverExpires, std::memory_order_relaxed);
@@ -127,12 +133,13 @@ struct BrickState {
   Coord origin;
   std::atomic<bool> pending{false};  // listed for emission (holds touched, not yet emitted voxels)
   alignas(64) std::atomic<uint64_t> key[kBrickVoxels];  // one cache line per (x, y) row
-  std::atomic<uint8_t> listed[kBrickVoxels];  // already in the next front
-  std::atomic<uint8_t> flags[kBrickVoxels];
-  // Bit i: voxel i is a band voxel of a Seeds::band_exact band (set before the first step, then only read). One
-  // cache line, tested before the voxel's key is loaded.
-  std::atomic<uint64_t> exact[kBrickVoxels / 64] = {};
-  bool isExact(int off) const { return (exact[off >> 6].load(std::memory_order_relaxed) >> (off & 63)) & 1; }
+  VoxelBits listed;   // already in the next front
+  VoxelBits emitted;  // delivered (final)
+  VoxelBits dirty;    // changed since the last correction round (listed in ThreadBuffers::dirty)
+  VoxelBits queued;   // already a candidate of the current correction round
+  // A band voxel of a Seeds::band_exact band (set before the first step, then only read). One cache line, tested
+  // before the voxel's key is loaded.
+  VoxelBits exact;
   std::unique_ptr<std::atomic<uint16_t>[]> expiry;  // paper mode: last step in which a voxel accepts offers
 };
 
@@ -149,9 +156,36 @@ struct FrontEntry {
   uint32_t site;
 };
 
+// Allocator of the front lists. Lists of 16 MiB or more are mapped and unmapped directly: glibc would otherwise
+// serve them from its heaps once it has seen large blocks freed, and the holes they leave stay resident while the
+// bricks keep growing. Smaller ones stay on the heap, whose reused pages cost no page faults.
+template <class T>
+struct FrontAllocator {
+  using value_type = T;
+  static constexpr size_t kMapBytes = size_t(16) << 20;
+  FrontAllocator() = default;
+  template <class U>
+  FrontAllocator(const FrontAllocator<U>&) {}
+  T* allocate(size_t n) {
+    const size_t bytes = n * sizeof(T);
+    if (bytes < kMapBytes) return std::allocator<T>().allocate(n);
+    void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) throw std::bad_alloc();
+    return static_cast<T*>(p);
+  }
+  void deallocate(T* p, size_t n) {
+    const size_t bytes = n * sizeof(T);
+    if (bytes < kMapBytes) std::allocator<T>().deallocate(p, n);
+    else ::munmap(p, bytes);
+  }
+  template <class U>
+  bool operator==(const FrontAllocator<U>&) const { return true; }
+};
+using FrontList = std::vector<FrontEntry, FrontAllocator<FrontEntry>>;
+
 struct ThreadBuffers {
-  std::vector<FrontEntry> next;       // voxels changed in this step (site filled in after the step)
-  std::vector<FrontEntry> deferred;   // offers held back beyond the admission threshold (voxel, site)
+  FrontList next;       // voxels changed in this step (site filled in after the step)
+  FrontList deferred;   // offers held back beyond the admission threshold (voxel, site)
   std::vector<uint32_t> pending;      // bricks that got their first unemitted voxel
   std::vector<BrickState*> allocated;
   std::vector<std::pair<VoxelRef, uint64_t>> corrections;
@@ -175,9 +209,11 @@ struct SiteMetric {
 
 class BandRun {
  public:
-  BandRun(const Grid& grid, const Seeds& seeds, const EngineOptions& opt, const SegmentCallback& cb)
+  BandRun(const Grid& grid, const Seeds& seeds, const EngineOptions& opt, const SegmentCallback& cb,
+          std::vector<BandVoxel>* owned_band)
       : grid_(grid),
         seeds_(seeds),
+        owned_band_(owned_band),
         opt_(opt),
         cb_(cb),
         stencil_(Stencil::get(opt.stencil)),
@@ -270,13 +306,11 @@ class BandRun {
           if (use_lifespan_) b->expiry[off].store(expiryFor(keyDist2(newkey)), std::memory_order_relaxed);
           if (!b->pending.load(std::memory_order_relaxed) && !b->pending.exchange(true)) tb.pending.push_back(bi);
         }
-        if (collect_dirty_ && !(b->flags[off].load(std::memory_order_relaxed) & kDirty) &&
-            !(b->flags[off].fetch_or(kDirty, std::memory_order_relaxed) & kDirty))
+        if (collect_dirty_ && !b->dirty.test(off) && b->dirty.set(off))
           tb.dirty.push_back({bi, uint16_t(off)});
         // Listed once per step. Two threads lowering the same voxel at once may both list it: the duplicate
         // offers the same snapshot site twice, which changes nothing.
-        if (propagates && !b->listed[off].load(std::memory_order_relaxed)) {
-          b->listed[off].store(1, std::memory_order_relaxed);
+        if (propagates && !b->listed.test(off) && b->listed.set(off)) {
           tb.next.push_back({bi, uint16_t(off), 0, 0});
         }
         return true;
@@ -289,19 +323,22 @@ class BandRun {
   template <bool kPoints>
   void pushFromT(const FrontEntry& e, ThreadBuffers& tb);
   void insertBand();
-  void step(std::vector<FrontEntry>& front);
+  void step(FrontList& front);
   bool isBoundary(const Coord& q, uint64_t k) const;
   void scanAndCheck();
   void checkVoxel(const VoxelRef& v, const Coord& q, uint64_t k, uint64_t* block, ThreadBuffers& tb) const;
-  std::vector<FrontEntry> correct(bool first_round);
+  FrontList correct(bool first_round);
   void gatherBlock(const Coord& q, uint64_t* block) const;
   bool emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats);
+  void buildChunk(size_t c0, size_t c1, const std::vector<uint32_t>& slot, const std::vector<uint8_t>& keep,
+                  uint32_t base, bool triangles, std::vector<Brick>& out);
   void rearmLifespans();
   void releaseBricks();
   void collectPending();
 
   const Grid& grid_;
   const Seeds& seeds_;
+  std::vector<BandVoxel>* owned_band_;  // seeds_.band when the caller handed the seeds over: freed once inserted
   const EngineOptions& opt_;
   const SegmentCallback& cb_;
   const Stencil& stencil_;
@@ -333,7 +370,7 @@ class BandRun {
 
   tbb::enumerable_thread_specific<ThreadBuffers> buffers_;
   std::vector<uint32_t> pending_bricks_;
-  std::vector<FrontEntry> deferred_;
+  FrontList deferred_;
   int64_t corrections_ = 0;
 };
 
@@ -440,7 +477,7 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
       if (gbi == kOutsideGrid) continue;
       gb = table_[gbi].load(std::memory_order_acquire);
     }
-    if (gb && gb->isExact(goff)) continue;
+    if (gb && gb->exact.test(goff)) continue;
     if (region_map && region_map[grid_.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
     targets[count++] = {&d, gb, gbi, gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched};
   }
@@ -507,12 +544,12 @@ void BandRun::insertBand() {
       const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
       // Band voxels are first touched at step 0; kNoSite voxels (distance 0, nothing to offer) never push.
       if (offer(b, bi, off, packKey(d2, band_dir, site), site != kNoSiteKey, tb) && seeds_.band_exact)
-        b->exact[off >> 6].fetch_or(uint64_t(1) << (off & 63), std::memory_order_relaxed);
+        b->exact.set(off);
     }
   });
 }
 
-void BandRun::step(std::vector<FrontEntry>& front) {
+void BandRun::step(FrontList& front) {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
     ThreadBuffers& tb = buffers_.local();
     for (size_t i = r.begin(); i != r.end(); ++i) pushFrom(front[i], tb);
@@ -595,7 +632,7 @@ void BandRun::scanAndCheck() {
         if (k == kUntouched || keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey ||
             keyDir(k) == kExactDir)
           continue;
-        if (b->flags[off].load(std::memory_order_relaxed) & kEmitted) continue;
+        if (b->emitted.test(off)) continue;
         const Coord l = brickLocal(off);
         const Coord q = b->origin + l;
         const uint32_t site = keySite(k);
@@ -641,7 +678,7 @@ void BandRun::checkVoxel(const VoxelRef& v, const Coord& q, uint64_t k, uint64_t
 // are checked is decided by the field alone, so the result does not depend on thread timing:
 //   * the first round of a segment checks every voxel of the segment at a site boundary (scanCandidates);
 //   * later rounds check only boundary voxels within distance 2 of a voxel changed since the last round.
-std::vector<FrontEntry> BandRun::correct(bool first_round) {
+FrontList BandRun::correct(bool first_round) {
   if (first_round) {
     collectPending();
     scanAndCheck();
@@ -672,12 +709,11 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
       });
     };
     for (const VoxelRef& d : dirty)
-      table_[d.brick].load(std::memory_order_relaxed)->flags[d.offset].fetch_and(uint8_t(~kDirty),
-                                                                                 std::memory_order_relaxed);
-    // Check each candidate once, as it is claimed (kQueued), without listing them: corrections are only recorded
+      table_[d.brick].load(std::memory_order_relaxed)->dirty.clear(d.offset);
+    // Check each candidate once, as it is claimed (queued), without listing them: corrections are only recorded
     // here and applied after the round, so which thread checks a voxel does not matter.
     aroundDirty([&](BrickState* b, uint32_t bi, int off, const Coord& q) {
-      if (b->flags[off].fetch_or(kQueued, std::memory_order_relaxed) & kQueued) return;
+      if (!b->queued.set(off)) return;
       const uint64_t k = b->key[off].load(std::memory_order_relaxed);
       if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey || keyDir(k) == kExactDir ||
           !isBoundary(q, k))
@@ -686,17 +722,16 @@ std::vector<FrontEntry> BandRun::correct(bool first_round) {
       checkVoxel({bi, uint16_t(off)}, q, k, block, buffers_.local());
     });
     aroundDirty([&](BrickState* b, uint32_t, int off, const Coord&) {
-      if (b->flags[off].load(std::memory_order_relaxed) & kQueued)
-        b->flags[off].fetch_and(uint8_t(~kQueued), std::memory_order_relaxed);
+      if (b->queued.test(off)) b->queued.clear(off);
     });
   }
-  std::vector<FrontEntry> front;
+  FrontList front;
   for (auto& tb : buffers_) {
     for (const auto& [v, key] : tb.corrections) {
       BrickState* b = table_[v.brick].load(std::memory_order_relaxed);
       b->key[v.offset].store(key, std::memory_order_relaxed);
       ++corrections_;
-      if (!(b->flags[v.offset].fetch_or(kDirty, std::memory_order_relaxed) & kDirty)) tb.dirty.push_back(v);
+      if (b->dirty.set(v.offset)) tb.dirty.push_back(v);
       if (stencil_.propagates(b->origin + brickLocal(v.offset)))
         front.push_back({v.brick, v.offset, uint8_t(kNoDirection), keySite(key)});
     }
@@ -783,7 +818,7 @@ void BandRun::rearmLifespans() {
       BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
       for (int off = 0; off < kBrickVoxels; ++off) {
         const uint64_t k = b->key[off].load(std::memory_order_relaxed);
-        if (k == kUntouched || (b->flags[off].load(std::memory_order_relaxed) & kEmitted)) continue;
+        if (k == kUntouched || b->emitted.test(off)) continue;
         b->expiry[off].store(expiryFor(keyDist2(k)), std::memory_order_relaxed);
       }
     }
@@ -797,8 +832,9 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
   const double h = grid_.voxelSize();
   const size_t n = pending_bricks_.size();
   // Pass 1: which pending bricks deliver voxels now, and which keep voxels for later segments. The output is then
-  // built in place, exactly sized: a segment's bricks are held once (2 KiB each), never copied or sorted (pending
-  // bricks are sorted by index, which is (z, y, x) order of their origins).
+  // built in chunks of pending bricks (sorted by index, which is (z, y, x) order of their origins), appended to an
+  // exactly reserved vector. In the last segment each chunk's engine bricks are freed as soon as it is built, so
+  // the output grows while the engine state shrinks instead of the two peaking together.
   std::vector<uint32_t> slot(n, 0);  // 1 + position in the output, or 0
   std::vector<uint8_t> keep(n, 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
@@ -806,7 +842,7 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
       BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
       for (int off = 0; off < kBrickVoxels && !(slot[i] && keep[i]); ++off) {
         const uint64_t k = b->key[off].load(std::memory_order_relaxed);
-        if (k == kUntouched || (b->flags[off].load(std::memory_order_relaxed) & kEmitted)) continue;
+        if (k == kUntouched || b->emitted.test(off)) continue;
         if (keyDist2(k) > thr2_) keep[i] = 1;
         else slot[i] = 1;
       }
@@ -818,35 +854,22 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
   for (uint8_t kept : keep) waiting |= kept != 0;
   const bool last = thr_is_limit_ || (nothing_deferred && !waiting);
   SegmentBricks seg;
-  seg.bricks.resize(count);
+  seg.bricks.reserve(count);
   const bool triangles = seeds_.kind == SiteKind::kTriangle;
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
-    uint32_t sites[kBrickVoxels];
-    for (size_t i = r.begin(); i != r.end(); ++i) {
-      BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
-      if (!keep[i]) b->pending.store(false, std::memory_order_relaxed);
-      if (!slot[i]) continue;
-      Brick& brick = seg.bricks[slot[i] - 1];
-      brick.origin = b->origin;
-      for (int off = 0; off < kBrickVoxels; ++off) {
-        const uint64_t k = b->key[off].load(std::memory_order_relaxed);
-        sites[off] = kNoSite;
-        if (k == kUntouched || keyDist2(k) > thr2_) continue;
-        const uint8_t f = b->flags[off].load(std::memory_order_relaxed);
-        if (f & kEmitted) continue;
-        const Coord c = b->origin + brickLocal(off);
-        const uint32_t s = keySite(k);
-        sites[off] = s == kNoSiteKey ? kNoSite : s;
-        // Triangle sites: the key's float squared distance is the exact one rounded to 24 bits, so its root is within
-        // an ulp of the output's float (a second point–triangle test per voxel would buy nothing). Points are cheap.
-        const double d2 = triangles ? double(keyDist2(k)) : metric_.dist2(s, c.x, c.y, c.z);
-        brick.values[off] = float(std::sqrt(d2) * h);
-        brick.mask.set(off);
-        b->flags[off].store(f | kEmitted, std::memory_order_relaxed);
-      }
-      if (seeds_.sign) seeds_.sign(brick, sites);
+  constexpr size_t kChunkBricks = 8192;
+  std::vector<Brick> part;
+  for (size_t c0 = 0; c0 < n; c0 += kChunkBricks) {
+    const size_t c1 = std::min(n, c0 + kChunkBricks);
+    const uint32_t base = uint32_t(seg.bricks.size());  // slot - 1 of the chunk's first output brick
+    part.assign(std::count_if(slot.begin() + c0, slot.begin() + c1, [](uint32_t v) { return v != 0; }), Brick{});
+    buildChunk(c0, c1, slot, keep, base, triangles, part);
+    seg.bricks.insert(seg.bricks.end(), part.begin(), part.end());
+    if (last) {
+      for (size_t i = c0; i < c1; ++i) delete table_[pending_bricks_[i]].exchange(nullptr, std::memory_order_relaxed);
+      if (c1 < n) ::malloc_trim(0);  // the freed bricks' pages back before the next chunk's output (the last: below)
     }
-  });
+  }
+  std::vector<Brick>().swap(part);
   if (last) releaseBricks();
   seg.index = index;
   seg.lower_world = lower_vox * h;
@@ -862,6 +885,39 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
   return last;
 }
 
+// Builds the output bricks of pending bricks [c0, c1) into `out` (out[slot - 1 - base]) and marks them delivered.
+void BandRun::buildChunk(size_t c0, size_t c1, const std::vector<uint32_t>& slot, const std::vector<uint8_t>& keep,
+                         uint32_t base, bool triangles, std::vector<Brick>& out) {
+  const double h = grid_.voxelSize();
+  tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 16), [&](const tbb::blocked_range<size_t>& r) {
+    uint32_t sites[kBrickVoxels];
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
+      if (!keep[i]) b->pending.store(false, std::memory_order_relaxed);
+      if (!slot[i]) continue;
+      Brick& brick = out[slot[i] - 1 - base];
+      brick.origin = b->origin;
+      for (int off = 0; off < kBrickVoxels; ++off) {
+        const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+        sites[off] = kNoSite;
+        if (k == kUntouched || keyDist2(k) > thr2_) continue;
+        if (b->emitted.test(off)) continue;
+        const Coord c = b->origin + brickLocal(off);
+        const uint32_t s = keySite(k);
+        sites[off] = s == kNoSiteKey ? kNoSite : s;
+        // Triangle sites: the key's float squared distance is the exact one rounded to 24 bits, so its root is within
+        // an ulp of the output's float (a second point–triangle test per voxel would buy nothing). Points are cheap.
+        const double d2 = triangles ? double(keyDist2(k)) : metric_.dist2(s, c.x, c.y, c.z);
+        brick.values[off] = float(std::sqrt(d2) * h);
+        brick.mask.set(off);
+      }
+      for (size_t w = 0; w < brick.mask.words.size(); ++w)
+        b->emitted.words[w].fetch_or(brick.mask.words[w], std::memory_order_relaxed);
+      if (seeds_.sign) seeds_.sign(brick, sites);
+    }
+  });
+}
+
 EngineResult BandRun::run() {
   using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
@@ -874,20 +930,27 @@ EngineResult BandRun::run() {
     return std::min(u, limit_vox_);
   };
   auto gatherFront = [&]() {
-    std::vector<FrontEntry> front;
+    FrontList front;
     size_t n = 0;
     for (auto& tb : buffers_) n += tb.next.size();
     front.reserve(n);
     for (auto& tb : buffers_) {
       front.insert(front.end(), tb.next.begin(), tb.next.end());
+      // A large buffer is given back rather than kept for the next step: the initial band's front can be tens of
+      // MB, and later fronts are mostly much smaller (regrowing costs little next to the pushes that fill it).
+      if (tb.next.capacity() > 65536) FrontList().swap(tb.next);
       tb.next.clear();
     }
+    // The next front is usually about this one's size: one buffer of that size per thread instead of a chain of
+    // doublings, whose freed links would stay behind as heap holes.
+    const size_t share = n / std::max<size_t>(1, buffers_.size()) + 4096;
+    for (auto& tb : buffers_) tb.next.reserve(share);
     // Snapshot each changed voxel's site as of the end of the step: the next step offers exactly these.
     tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i != r.end(); ++i) {
         BrickState* b = table_[front[i].brick].load(std::memory_order_relaxed);
         const uint64_t k = b->key[front[i].offset].load(std::memory_order_relaxed);
-        b->listed[front[i].offset].store(0, std::memory_order_relaxed);
+        b->listed.clear(front[i].offset);
         front[i].site = keySite(k);
         front[i].dir = uint8_t(keyDir(k));
       }
@@ -909,7 +972,7 @@ EngineResult BandRun::run() {
     };
     tbb::parallel_sort(deferred_.begin(), deferred_.end(), order);
     deferred_.erase(std::unique(deferred_.begin(), deferred_.end(), same), deferred_.end());
-    std::vector<FrontEntry> f;
+    FrontList f;
     f.swap(deferred_);
     return f;
   };
@@ -919,7 +982,8 @@ EngineResult BandRun::run() {
   bucket_vox_ =
       opt_.mode == PropagationMode::kExact && seeds_.siteCount() >= kBucketMinSites ? kBucketVoxels : 0.0;
   insertBand();
-  std::vector<FrontEntry> front = gatherFront();
+  if (owned_band_) std::vector<BandVoxel>().swap(*owned_band_);
+  FrontList front = gatherFront();
 
   for (int seg = 0;; ++seg) {
     const auto ts = Clock::now();
@@ -1000,16 +1064,16 @@ EngineResult BandRun::run() {
 
 }  // namespace
 
-EngineResult computeDistanceField(const Grid& grid, const Seeds& seeds, const EngineOptions& options,
-                                  const SegmentCallback& on_segment) {
+namespace {
+
+EngineResult runEngine(const Grid& grid, const Seeds& seeds, const EngineOptions& options,
+                       const SegmentCallback& on_segment, std::vector<BandVoxel>* owned_band) {
   if (std::string e = validateOptions(grid, options); !e.empty()) throw std::invalid_argument(e);
-  if (!seeds.region || seeds.region->size() == size_t(grid.voxelCount())) {
-  } else {
+  if (seeds.region && seeds.region->size() != size_t(grid.voxelCount()))
     throw std::invalid_argument("seeds.region must hold one label per grid voxel");
-  }
   EngineResult result;
   auto body = [&] {
-    BandRun run(grid, seeds, options, on_segment);
+    BandRun run(grid, seeds, options, on_segment, owned_band);
     result = run.run();
   };
   if (options.threads > 0) {
@@ -1019,6 +1083,19 @@ EngineResult computeDistanceField(const Grid& grid, const Seeds& seeds, const En
     body();
   }
   return result;
+}
+
+}  // namespace
+
+EngineResult computeDistanceField(const Grid& grid, const Seeds& seeds, const EngineOptions& options,
+                                  const SegmentCallback& on_segment) {
+  return runEngine(grid, seeds, options, on_segment, nullptr);
+}
+
+EngineResult computeDistanceField(const Grid& grid, Seeds&& seeds, const EngineOptions& options,
+                                  const SegmentCallback& on_segment) {
+  Seeds owned = std::move(seeds);
+  return runEngine(grid, owned, options, on_segment, &owned.band);
 }
 
 }  // namespace distband

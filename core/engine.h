@@ -15,7 +15,8 @@
 //   * `interrupted` is polled between steps; when it returns true the run stops and returns
 //     EngineResult::interrupted = true (bricks already delivered stay valid).
 //   * Seeds are only read and must outlive the call; concurrent calls on the same or different seeds are fine.
-//   * Memory: 10 bytes per touched voxel (12 in paper mode), in whole bricks, plus one segment's output bricks.
+//   * Memory: 8.6 bytes per touched voxel (2 more in paper mode), in whole bricks, plus one segment's output bricks
+//     (in the last segment the engine's bricks are freed while the output is built).
 #pragma once
 
 #include <cstdint>
@@ -90,6 +91,11 @@ using SegmentCallback = std::function<void(SegmentBricks&&)>;
 /// Runs the engine. Preconditions (checked, std::invalid_argument): grid.validate() and validateOptions() are
 /// empty, every band voxel lies inside the grid and names a site < seeds.siteCount() or kNoSite.
 EngineResult computeDistanceField(const Grid& grid, const Seeds& seeds, const EngineOptions& options,
+                                  const SegmentCallback& on_segment);
+
+/// The same, taking the seeds over (`seeds` is left empty): the band is freed as soon as it is in the engine, which
+/// for a thin band around a large mesh is a sizeable part of the run's peak memory.
+EngineResult computeDistanceField(const Grid& grid, Seeds&& seeds, const EngineOptions& options,
                                   const SegmentCallback& on_segment);
 
 /// The default lifespan margin (steps) added in paper mode; see docs/algorithm.md for how it was found.

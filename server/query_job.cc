@@ -56,7 +56,7 @@ void QueryJob::run() {
       options.threads = 0;  // the shared arena we are executing in
       options.interrupted = [this] { return cancelled_.load(std::memory_order_relaxed); };
       last_callback_end_ = Clock::now();
-      result_ = computeDistanceField(query_.grid, seeds, options,
+      result_ = computeDistanceField(query_.grid, std::move(seeds), options,
                                      [this](SegmentBricks&& s) { emitSegment(std::move(s)); });
     });
   } catch (const std::bad_alloc&) {

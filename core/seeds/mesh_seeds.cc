@@ -5,6 +5,8 @@
 #include <cmath>
 #include <memory>
 
+#include <malloc.h>
+
 #include <embree3/rtcore.h>
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
@@ -139,13 +141,22 @@ class ParityScene {
   RTCScene scene_ = nullptr;
 };
 
+// A unit normal in single precision: it only decides which side of the surface a point lies on, and the sign
+// data of a large mesh is otherwise a good part of a thin band's memory.
+struct Normal3f {
+  float x = 0, y = 0, z = 0;
+  Normal3f() = default;
+  explicit Normal3f(const Vec3d& v) : x(float(v.x)), y(float(v.y)), z(float(v.z)) {}
+  double dot(const Vec3d& v) const { return x * v.x + y * v.y + z * v.z; }
+};
+
 // Everything the sign function needs, immutable once built, shared by every copy of Seeds::sign.
 struct MeshSigner {
   double voxel_size = 1;
   SignMethod method = SignMethod::kPseudonormal;
-  std::vector<std::array<Vec3d, 3>> tris;          // index space
+  std::vector<Vec3d> verts;                        // index space
   std::vector<std::array<uint32_t, 3>> corners;    // mesh vertex ids
-  std::vector<Vec3d> face_n, edge_n, vertex_n;     // pseudonormals (edge_n: 3 per triangle)
+  std::vector<Normal3f> face_n, edge_n, vertex_n;  // pseudonormals (edge_n: 3 per triangle)
   std::vector<uint32_t> site_triangle;             // paper mode: site -> triangle (empty: site is the triangle)
   std::unique_ptr<WindingNumber> winding;
   std::unique_ptr<ParityScene> parity;
@@ -154,9 +165,9 @@ struct MeshSigner {
 
   bool insidePseudonormal(const Vec3d& p, uint32_t t) const {
     Feature f;
-    const auto& tri = tris[t];
-    const Vec3d cp = closestWithFeature(p, tri[0], tri[1], tri[2], &f);
-    Vec3d n;
+    const auto& c = corners[t];
+    const Vec3d cp = closestWithFeature(p, verts[c[0]], verts[c[1]], verts[c[2]], &f);
+    Normal3f n;
     switch (f) {
       case Feature::kFace: n = face_n[t]; break;
       case Feature::kEdge0: n = edge_n[3 * t + 0]; break;
@@ -221,21 +232,26 @@ struct MeshSigner {
   }
 };
 
-void buildPseudonormals(const TriangleMesh& mesh, MeshSigner* s) {
-  const size_t nt = s->tris.size();
-  s->face_n.resize(nt);
-  s->edge_n.assign(3 * nt, Vec3d{});
-  s->vertex_n.assign(mesh.vertices.size(), Vec3d{});
-  for (size_t t = 0; t < nt; ++t) {
-    const auto& tri = s->tris[t];
-    s->face_n[t] = normalized((tri[1] - tri[0]).cross(tri[2] - tri[0]));
+void buildPseudonormals(MeshSigner* s) {
+  const size_t nt = s->corners.size();
+  std::vector<Vec3d> face(nt);
+  std::vector<std::array<double, 3>> angles(nt);
+  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
+    const auto& c = s->corners[t];
+    const Vec3d tri[3] = {s->verts[c[0]], s->verts[c[1]], s->verts[c[2]]};
+    face[t] = normalized((tri[1] - tri[0]).cross(tri[2] - tri[0]));
     for (int k = 0; k < 3; ++k) {
       const Vec3d e1 = normalized(tri[(k + 1) % 3] - tri[k]), e2 = normalized(tri[(k + 2) % 3] - tri[k]);
-      const double angle = std::acos(std::clamp(e1.dot(e2), -1.0, 1.0));
-      Vec3d& vn = s->vertex_n[s->corners[t][k]];
-      vn = vn + s->face_n[t] * angle;
+      angles[t][k] = std::acos(std::clamp(e1.dot(e2), -1.0, 1.0));
     }
-  }
+  });
+  std::vector<Vec3d> vertex(s->verts.size());
+  for (size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) vertex[s->corners[t][k]] = vertex[s->corners[t][k]] + face[t] * angles[t][k];
+  s->vertex_n.resize(vertex.size());
+  for (size_t v = 0; v < vertex.size(); ++v) s->vertex_n[v] = Normal3f(normalized(vertex[v]));
+  s->face_n.resize(nt);
+  for (size_t t = 0; t < nt; ++t) s->face_n[t] = Normal3f(face[t]);
   // Edge pseudonormal: the sum of the normals of the triangles sharing the edge.
   struct EdgeUse {
     uint64_t key;
@@ -248,12 +264,15 @@ void buildPseudonormals(const TriangleMesh& mesh, MeshSigner* s) {
       const uint64_t a = s->corners[t][e], b = s->corners[t][(e + 1) % 3];
       uses.push_back({std::min(a, b) << 32 | std::max(a, b), uint32_t(3 * t + e)});
     }
-  std::sort(uses.begin(), uses.end(), [](const EdgeUse& x, const EdgeUse& y) { return x.key < y.key; });
+  tbb::parallel_sort(uses.begin(), uses.end(), [](const EdgeUse& x, const EdgeUse& y) {
+    return x.key < y.key || (x.key == y.key && x.slot < y.slot);
+  });
+  s->edge_n.resize(3 * nt);
   for (size_t i = 0; i < uses.size();) {
     size_t j = i;
     Vec3d sum{};
-    while (j < uses.size() && uses[j].key == uses[i].key) sum = sum + s->face_n[uses[j++].slot / 3];
-    for (size_t k = i; k < j; ++k) s->edge_n[uses[k].slot] = sum;
+    while (j < uses.size() && uses[j].key == uses[i].key) sum = sum + face[uses[j++].slot / 3];
+    for (size_t k = i; k < j; ++k) s->edge_n[uses[k].slot] = Normal3f(normalized(sum));
     i = j;
   }
 }
@@ -408,16 +427,16 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
     });
   } else {
     seeds.kind = SiteKind::kTriangle;
-    seeds.triangles = tris;
   }
   switch (options.sign) {
     case SignMethod::kUnsigned: break;
     case SignMethod::kPseudonormal:
-      signer->tris = std::move(tris);
+      signer->verts.resize(mesh.vertices.size());
+      for (size_t v = 0; v < mesh.vertices.size(); ++v) signer->verts[v] = grid.indexOf(mesh.vertices[v]);
       signer->corners = mesh.triangles;
-      buildPseudonormals(mesh, signer.get());
+      buildPseudonormals(signer.get());
       break;
-    case SignMethod::kWinding: signer->winding = std::make_unique<WindingNumber>(std::move(tris)); break;
+    case SignMethod::kWinding: signer->winding = std::make_unique<WindingNumber>(tris); break;
     case SignMethod::kParity:
       signer->parity = std::make_unique<ParityScene>(tris);
       if (!signer->parity->ok()) return "cannot create the Embree device for parity signs";
@@ -425,6 +444,10 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   }
   if (options.sign != SignMethod::kUnsigned)
     seeds.sign = [signer](Brick& brick, const uint32_t* sites) { signer->sign(brick, sites); };
+  if (seeds.kind == SiteKind::kTriangle) seeds.triangles = std::move(tris);
+  // The scan's temporaries (as large as the band) were freed in the worker threads' malloc arenas, which keep
+  // the pages; hand them back so the engine's bricks do not come on top of them.
+  ::malloc_trim(0);
 
   if (stats) {
     stats->band_voxels = static_cast<int64_t>(seeds.band.size());
