@@ -792,13 +792,18 @@ void BandRun::gatherBlock(const Coord& q, uint64_t* block) const {
 }
 
 // After the last segment's bricks are built nothing reads the band again: free it before the consumer builds its
-// output, so the two never peak together, and hand the pages back (freed by the worker threads' malloc arenas,
+// output, so the two never peak together, and hand large amounts back (freed in the worker threads' malloc arenas,
 // they would otherwise stay in this process).
 void BandRun::releaseBricks() {
+  std::atomic<size_t> freed{0};
   tbb::parallel_for(tbb::blocked_range<size_t>(0, table_.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i != r.end(); ++i) delete table_[i].exchange(nullptr, std::memory_order_relaxed);
+    size_t count = 0;
+    for (size_t i = r.begin(); i != r.end(); ++i)
+      if (BrickState* b = table_[i].exchange(nullptr, std::memory_order_relaxed)) delete b, ++count;
+    freed += count;
   });
-  ::malloc_trim(0);
+  // Worth a trim (a few ms) only when it hands back a sizeable amount.
+  if (freed * sizeof(BrickState) >= (size_t(64) << 20)) ::malloc_trim(0);
 }
 
 // Merges the bricks that got their first unemitted voxel into pending_bricks_, kept sorted by brick index.
@@ -857,8 +862,12 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
   seg.bricks.reserve(count);
   const bool triangles = seeds_.kind == SiteKind::kTriangle;
   constexpr size_t kChunkBricks = 8192;
+  if (n <= kChunkBricks) {  // one chunk: built in place
+    seg.bricks.resize(count);
+    buildChunk(0, n, slot, keep, 0, triangles, seg.bricks);
+  }
   std::vector<Brick> part;
-  for (size_t c0 = 0; c0 < n; c0 += kChunkBricks) {
+  for (size_t c0 = 0; n > kChunkBricks && c0 < n; c0 += kChunkBricks) {
     const size_t c1 = std::min(n, c0 + kChunkBricks);
     const uint32_t base = uint32_t(seg.bricks.size());  // slot - 1 of the chunk's first output brick
     part.assign(std::count_if(slot.begin() + c0, slot.begin() + c1, [](uint32_t v) { return v != 0; }), Brick{});

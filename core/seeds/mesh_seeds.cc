@@ -163,9 +163,14 @@ struct MeshSigner {
 
   uint32_t triangleOf(uint32_t site) const { return site_triangle.empty() ? site : site_triangle[site]; }
 
-  bool insidePseudonormal(const Vec3d& p, uint32_t t) const {
-    Feature f;
+  /// `dist` is p's distance to triangle t (voxels), known to float precision.
+  bool insidePseudonormal(const Vec3d& p, uint32_t t, double dist) const {
     const auto& c = corners[t];
+    // When the distance is the plane's, the closest point lies in the face (up to ~0.5 % of the distance from its
+    // border, where any consistent pseudonormal agrees with the face normal): no region tests needed.
+    const double plane = face_n[t].dot(p - verts[c[0]]);
+    if (plane * plane >= dist * dist * (1 - 1e-5)) return plane < 0;
+    Feature f;
     const Vec3d cp = closestWithFeature(p, verts[c[0]], verts[c[1]], verts[c[2]], &f);
     Normal3f n;
     switch (f) {
@@ -197,7 +202,8 @@ struct MeshSigner {
     if (far >= 0) {
       const Coord c = brick.origin + brickLocal(far);
       const Vec3d p{double(c.x), double(c.y), double(c.z)};
-      const bool inside = method == SignMethod::kPseudonormal ? insidePseudonormal(p, triangleOf(sites[far]))
+      const bool inside = method == SignMethod::kPseudonormal
+                              ? insidePseudonormal(p, triangleOf(sites[far]), std::abs(brick.values[far]) / voxel_size)
                           : method == SignMethod::kWinding    ? winding->query(p) > 0.5
                                                               : parity->inside(p);
       if (inside)
@@ -213,7 +219,7 @@ struct MeshSigner {
       bool inside = false;
       if (method == SignMethod::kPseudonormal) {
         if (sites[i] == kNoSite) continue;
-        inside = insidePseudonormal(p, triangleOf(sites[i]));
+        inside = insidePseudonormal(p, triangleOf(sites[i]), std::abs(brick.values[i]) / voxel_size);
       } else {
         bool found = false;
         for (auto it = balls.rbegin(); it != balls.rend(); ++it)
@@ -380,8 +386,14 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
           const double rest = r2 - ex * ex - ey * ey;
           if (rest < 0) continue;
           const double reach = std::sqrt(rest);
-          const int z0 = std::max(lo.z, int(std::ceil(bz0 - reach))), z1 = std::min(hi.z, int(std::floor(bz1 + reach)));
+          int z0 = std::max(lo.z, int(std::ceil(bz0 - reach))), z1 = std::min(hi.z, int(std::floor(bz1 + reach)));
           const double row_plane = n.x * x + n.y * y - plane0;
+          // ... and within the radius of the triangle's plane (when the plane is not nearly parallel to z).
+          if (std::abs(n.z) > 0.25) {
+            const double za = (-radius - row_plane) / n.z, zb = (radius - row_plane) / n.z;
+            z0 = std::max(z0, int(std::ceil(std::min(za, zb))));
+            z1 = std::min(z1, int(std::floor(std::max(za, zb))));
+          }
           for (int z = z0; z <= z1; ++z) {
             const double plane = row_plane + n.z * z;
             const int o = brickOffset(x & 7, y & 7, z & 7);
