@@ -1,18 +1,27 @@
-// Helpers shared by the benchmark programs: peak RSS of this process, running a child command, and reading the
-// peak RSS that `/usr/bin/time -v` reports for it. Header-only; bench code only.
+// Helpers shared by the benchmark programs: the median of timings, peak RSS of this process, running a child
+// command, and reading the peak RSS that `/usr/bin/time -v` reports for it. Header-only; bench code only.
 #pragma once
 
 #include <sys/resource.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace distband::bench {
+
+/// Median of a non-empty sample (the mean of the middle two for an even count).
+inline double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+}
 
 /// Peak resident set size of this process so far, in MiB (ru_maxrss is in KiB on Linux).
 inline double peakRssMb() {

@@ -332,12 +332,6 @@ ErrorStats compareDense(const std::vector<float>& field, int n, double limit, Ex
       });
 }
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t m = v.size() / 2;
-  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
-}
-
 json jsonNumberOrNull(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 // ---------------------------------------------------------------------------------------------------------
@@ -436,7 +430,7 @@ int runCase(const CaseSpec& spec) {
   row["limit"] = jsonNumberOrNull(spec.limit);
   row["threads"] = spec.threads;
   row["reps"] = spec.reps;
-  row["time_s"] = median(times);
+  row["time_s"] = bench::median(times);
   row["times_s"] = times;
   row["engine_s"] = last.seconds;
   row["steps"] = last.steps;

@@ -188,9 +188,12 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   };
 
   EngineOptions options;
-  const std::optional<StencilKind> stencil = parseStencil(a.stencil);
-  if (!stencil) return usage(fmt::format("--stencil '{}': expected cubic26, cubic18, cubic6 or fcc12", a.stencil));
-  options.stencil = *stencil;
+  if (a.stencil != "auto") {
+    const std::optional<StencilKind> stencil = parseStencil(a.stencil);
+    if (!stencil)
+      return usage(fmt::format("--stencil '{}': expected auto, cubic26, cubic18, cubic6 or fcc12", a.stencil));
+    options.stencil = *stencil;
+  }
   if (a.mesh.empty() && !parseMode(a.mode, &options.mode))
     return usage(fmt::format("--mode '{}': expected exact or paper", a.mode));
   // Meshes: exact-feature propagates closest triangles to convergence; paper propagates closest points with the
@@ -222,8 +225,9 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   if (std::string e = openBrickSink(a.out, layout, &sink); !e.empty()) return usage("--out " + e);
   if (!a.meta.empty() && std::filesystem::is_directory(a.meta)) return usage("--meta " + a.meta + ": is a directory");
 
+  const StencilKind stencil = options.stencil.value_or(defaultStencil(in.seeds.kind));
   ctx.out << fmt::format("distband compute: {}, voxel size {:g}, stencil {}, mode {}, segment {}, limit {}, threads {}\n",
-                         in.description, in.grid.voxelSize(), stencilName(options.stencil), modeName(options.mode),
+                         in.description, in.grid.voxelSize(), stencilName(stencil), modeName(options.mode),
                          a.segment > 0 ? fmt::format("{:g}", a.segment) : std::string("none"),
                          std::isfinite(a.limit) ? fmt::format("{:g}", a.limit) : std::string("none"),
                          a.threads > 0 ? std::to_string(a.threads) : std::string("all"));
@@ -266,7 +270,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
     meta.signed_distance = in.signed_distance;
     meta.limit_world = a.limit;
     meta.background_world = layout.background;
-    meta.stencil = std::string(stencilName(options.stencil));
+    meta.stencil = std::string(stencilName(stencil));
     meta.mode = std::string(modeName(options.mode));
     meta.segment_length_world = a.segment;
     meta.voxels_delivered = result.voxels;
@@ -304,7 +308,9 @@ CliCommand registerComputeCommand(CLI::App& app, const CliContext& context) {
   cmd->add_option("--voxel-size", args->voxel_size, "Voxel size in world units (default 1; meshes: or --resolution)")
       ->default_val(1.0);
   cmd->add_option("--origin", args->origin, "World position of voxel (0,0,0): x,y,z")->default_val("0,0,0");
-  cmd->add_option("--stencil", args->stencil, "cubic26 | cubic18 | cubic6 | fcc12")->default_val("cubic26");
+  cmd->add_option("--stencil", args->stencil,
+                  "auto (fcc12 for meshes in exact-feature mode, else cubic26) | cubic26 | cubic18 | cubic6 | fcc12")
+      ->default_val("auto");
   cmd->add_option("--mode", args->mode,
                   "exact (default) | paper (the SMI 2009 lifespan method); meshes: exact-feature | paper")
       ->default_val("exact");

@@ -41,7 +41,7 @@ struct ComputeArgs {
   std::string sign = "pseudonormal";  ///< mesh: pseudonormal | winding | parity | unsigned
   bool second_ring = false;      ///< mesh: also run the engine's second-ring correction
   std::string origin = "0,0,0";
-  std::string stencil = "cubic26";
+  std::string stencil = "auto";
   std::string mode = "exact";
   double segment = 0;                                         ///< world units; 0: one segment
   double limit = std::numeric_limits<double>::infinity();     ///< world units

@@ -29,7 +29,7 @@ struct QueryArgs {
   int padding = -1;  ///< -1: the server's default
   double voxel_size = 0;
   std::string dims, origin, box;
-  std::string stencil = "cubic26", mode = "exact", sign, encoding = "float32", progress = "auto";
+  std::string stencil = "auto", mode = "exact", sign, encoding = "float32", progress = "auto";
   double segment = 0;
   double limit = 0;
   double deadline_s = 0;
@@ -137,9 +137,10 @@ std::string buildRequest(const QueryArgs& a, RemoteClient& client, const CliCont
     setVec(g->mutable_box()->mutable_max(), hi);
   }
   v1::Stencil stencil;
-  if (!pick(a.stencil, {{"cubic6", v1::STENCIL_CUBIC6}, {"cubic18", v1::STENCIL_CUBIC18},
-                        {"cubic26", v1::STENCIL_CUBIC26}, {"fcc12", v1::STENCIL_FCC12}}, &stencil))
-    return fmt::format("--stencil '{}': expected cubic6, cubic18, cubic26 or fcc12", a.stencil);
+  if (!pick(a.stencil, {{"auto", v1::STENCIL_UNSPECIFIED}, {"cubic6", v1::STENCIL_CUBIC6},
+                        {"cubic18", v1::STENCIL_CUBIC18}, {"cubic26", v1::STENCIL_CUBIC26},
+                        {"fcc12", v1::STENCIL_FCC12}}, &stencil))
+    return fmt::format("--stencil '{}': expected auto, cubic6, cubic18, cubic26 or fcc12", a.stencil);
   r->set_stencil(stencil);
   v1::PropagationMode mode;
   if (!pick(a.mode, {{"exact", v1::PROPAGATION_MODE_EXACT}, {"exact-feature", v1::PROPAGATION_MODE_EXACT},
@@ -360,7 +361,10 @@ CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
   cmd->add_option("--dims", args->dims, "Explicit grid dims X,Y,Z (with --voxel-size; volumes: the mask's)");
   cmd->add_option("--origin", args->origin, "World position of voxel (0,0,0) with --dims: x,y,z");
   cmd->add_option("--box", args->box, "Explicit world box x0,y0,z0,x1,y1,z1");
-  cmd->add_option("--stencil", args->stencil, "cubic26 | cubic18 | cubic6 | fcc12")->capture_default_str();
+  cmd->add_option("--stencil", args->stencil,
+                  "auto (the server's default: fcc12 for meshes in exact mode, else cubic26) | cubic26 | cubic18 | "
+                  "cubic6 | fcc12")
+      ->capture_default_str();
   cmd->add_option("--mode", args->mode, "exact (exact-feature for meshes) | paper")->capture_default_str();
   cmd->add_option("--sign", args->sign,
                   "pseudonormal | winding | parity | unsigned (meshes), mask-inside | unsigned (volumes)");

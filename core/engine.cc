@@ -42,6 +42,10 @@ bool parseMode(std::string_view name, PropagationMode* mode) {
   return true;
 }
 
+StencilKind defaultStencil(SiteKind kind) {
+  return kind == SiteKind::kTriangle ? StencilKind::kFcc12 : StencilKind::kCubic26;
+}
+
 int defaultLifespanMargin(StencilKind stencil) {
   // The paper's t_min/t_max bounds hold for arrival times counted from the site; our clock starts at the initial
   // band, up to ~1 voxel (1–2 steps) off the site. See docs/algorithm.md and the lifespan tests.
@@ -216,7 +220,7 @@ class BandRun {
         owned_band_(owned_band),
         opt_(opt),
         cb_(cb),
-        stencil_(Stencil::get(opt.stencil)),
+        stencil_(Stencil::get(opt.stencil.value_or(defaultStencil(seeds.kind)))),
         metric_{seeds},
         dims_(grid.dims()),
         bdims_(grid.brickDims()),
@@ -226,7 +230,7 @@ class BandRun {
     buildLinkTables();
     if (opt.mode == PropagationMode::kPaper) {
       alpha_ = opt.lifespan_alpha < 0 ? stencil_.alpha : opt.lifespan_alpha;
-      margin_ = opt.lifespan_margin < 0 ? defaultLifespanMargin(opt.stencil) : opt.lifespan_margin;
+      margin_ = opt.lifespan_margin < 0 ? defaultLifespanMargin(stencil_.kind) : opt.lifespan_margin;
       use_lifespan_ = std::isfinite(alpha_);
     }
     max_link_ = stencil_.fcc ? std::sqrt(2.0) : 0.0;

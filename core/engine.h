@@ -48,7 +48,8 @@ std::string_view modeName(PropagationMode mode);
 bool parseMode(std::string_view name, PropagationMode* mode);  ///< "paper", "exact"
 
 struct EngineOptions {
-  StencilKind stencil = StencilKind::kCubic26;
+  /// Unset: defaultStencil(seeds.kind).
+  std::optional<StencilKind> stencil;
   PropagationMode mode = PropagationMode::kExact;
   double segment_length_world = 0;                                    ///< 0: a single segment
   double limit_world = std::numeric_limits<double>::infinity();        ///< distance limit (world units)
@@ -97,6 +98,11 @@ EngineResult computeDistanceField(const Grid& grid, const Seeds& seeds, const En
 /// for a thin band around a large mesh is a sizeable part of the run's peak memory.
 EngineResult computeDistanceField(const Grid& grid, Seeds&& seeds, const EngineOptions& options,
                                   const SegmentCallback& on_segment);
+
+/// The stencil of an EngineOptions without one: fcc12 for triangle sites (meshes in exact-feature mode: about half
+/// cubic26's time at the same accuracy class, docs/benchmarks.md), cubic26 for point sites (points, volumes, and
+/// meshes in paper mode, where it is the paper's stencil).
+StencilKind defaultStencil(SiteKind kind);
 
 /// The default lifespan margin (steps) added in paper mode; see docs/algorithm.md for how it was found.
 int defaultLifespanMargin(StencilKind stencil);

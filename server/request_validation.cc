@@ -141,11 +141,11 @@ grpc::Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& option
 
   // Enumerations (proto3 enums are open: unknown numbers must be rejected, not cast).
   switch (r.stencil()) {
-    case v1::STENCIL_UNSPECIFIED:
-    case v1::STENCIL_CUBIC26: q.stencil = v1::STENCIL_CUBIC26; q.engine.stencil = StencilKind::kCubic26; break;
-    case v1::STENCIL_CUBIC6: q.stencil = r.stencil(); q.engine.stencil = StencilKind::kCubic6; break;
-    case v1::STENCIL_CUBIC18: q.stencil = r.stencil(); q.engine.stencil = StencilKind::kCubic18; break;
-    case v1::STENCIL_FCC12: q.stencil = r.stencil(); q.engine.stencil = StencilKind::kFcc12; break;
+    case v1::STENCIL_UNSPECIFIED: break;  // the engine's default for the site kind, resolved below
+    case v1::STENCIL_CUBIC26: q.engine.stencil = StencilKind::kCubic26; break;
+    case v1::STENCIL_CUBIC6: q.engine.stencil = StencilKind::kCubic6; break;
+    case v1::STENCIL_CUBIC18: q.engine.stencil = StencilKind::kCubic18; break;
+    case v1::STENCIL_FCC12: q.engine.stencil = StencilKind::kFcc12; break;
     default: return invalid(fmt::format("stencil must be a Stencil value 0..4 (got {})", int(r.stencil())));
   }
   switch (r.mode()) {
@@ -153,6 +153,16 @@ grpc::Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& option
     case v1::PROPAGATION_MODE_EXACT: q.mode = v1::PROPAGATION_MODE_EXACT; q.engine.mode = PropagationMode::kExact; break;
     case v1::PROPAGATION_MODE_PAPER: q.mode = r.mode(); q.engine.mode = PropagationMode::kPaper; break;
     default: return invalid(fmt::format("mode must be a PropagationMode value 0..2 (got {})", int(r.mode())));
+  }
+  // Meshes in exact mode propagate triangle sites; paper mode and the other seeds propagate points.
+  const SiteKind sites = q.seed_kind == ResolvedQuery::SeedKind::kMesh && q.engine.mode == PropagationMode::kExact
+                             ? SiteKind::kTriangle
+                             : SiteKind::kPoint;
+  switch (q.engine.stencil.value_or(defaultStencil(sites))) {
+    case StencilKind::kCubic6: q.stencil = v1::STENCIL_CUBIC6; break;
+    case StencilKind::kCubic18: q.stencil = v1::STENCIL_CUBIC18; break;
+    case StencilKind::kCubic26: q.stencil = v1::STENCIL_CUBIC26; break;
+    case StencilKind::kFcc12: q.stencil = v1::STENCIL_FCC12; break;
   }
   switch (r.encoding()) {
     case v1::BRICK_ENCODING_UNSPECIFIED:

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <random>
 #include <functional>
 #include <map>
@@ -42,13 +43,16 @@ Grid gridFor(const TriangleMesh& mesh, int resolution, int padding) {
 }
 
 // Seeds + engine into a dense field; undelivered voxels stay NaN.
+// `stencil` unset: the engine's default for the sites (fcc12 for exact-feature, cubic26 for paper mode).
 DenseField compute(const Grid& grid, const TriangleMesh& mesh, MeshSeedOptions so, double limit_voxels,
-                   PropagationMode engine_mode = PropagationMode::kExact) {
+                   PropagationMode engine_mode = PropagationMode::kExact,
+                   std::optional<StencilKind> stencil = std::nullopt) {
   so.limit_voxels = limit_voxels;
   Seeds seeds;
   EXPECT_EQ(makeMeshSeeds(grid, mesh, so, &seeds), "");
   EngineOptions eo;
   eo.mode = engine_mode;
+  eo.stencil = stencil;
   eo.limit_world = limit_voxels * grid.voxelSize();
   DenseField field(grid, std::numeric_limits<float>::quiet_NaN());
   computeDistanceField(grid, seeds, eo, [&](SegmentBricks&& s) { field.add(s); });
@@ -109,15 +113,22 @@ TEST(TestShapes, AreClosedAndOutward) {
 }
 
 // Every voxel of a full (unlimited) field, every sign method: distances within the tessellation error of the
-// analytic SDF, and every sign correct where the mesh and the shape agree on it.
+// analytic SDF, and every sign correct where the mesh and the shape agree on it. With cubic26 the triangle-id
+// propagation finds every voxel's closest triangle here; the default fcc12 (about half the time) offers each voxel
+// fewer candidates and misses some at this coarse resolution by up to ~0.13 voxel (measured on the torus), allowed
+// for separately.
 TEST(MeshSeedsTest, AnalyticShapesMatchTheirSdfWithEverySignMethod) {
   for (const Shape& s : analyticShapes()) {
     const Grid grid = gridFor(s.mesh, 36, 3);
     const double h = grid.voxelSize();
-    for (SignMethod method : {SignMethod::kPseudonormal, SignMethod::kWinding, SignMethod::kParity}) {
+    for (SignMethod method : {SignMethod::kPseudonormal, SignMethod::kWinding, SignMethod::kParity})
+    for (std::optional<StencilKind> stencil : {std::optional<StencilKind>(StencilKind::kCubic26),
+                                               std::optional<StencilKind>()}) {
+      const double allowed = s.tessellation_error + (stencil ? 1e-5 : 0.2) * h;
       MeshSeedOptions so;
       so.sign = method;
-      const DenseField field = compute(grid, s.mesh, so, std::numeric_limits<double>::infinity());
+      const DenseField field =
+          compute(grid, s.mesh, so, std::numeric_limits<double>::infinity(), PropagationMode::kExact, stencil);
       ASSERT_EQ(field.written(), grid.voxelCount()) << s.name;
       double max_err = 0;
       int64_t sign_errors = 0;
@@ -130,8 +141,8 @@ TEST(MeshSeedsTest, AnalyticShapesMatchTheirSdfWithEverySignMethod) {
             max_err = std::max(max_err, std::abs(got - exact));
             if (std::abs(exact) > s.tessellation_error + 1e-6 * h && (got < 0) != (exact < 0)) ++sign_errors;
           }
-      EXPECT_LE(max_err, s.tessellation_error + 1e-5 * h)
-          << s.name << " / " << signMethodName(method) << ": max error " << max_err / h << " voxels";
+      EXPECT_LE(max_err, allowed) << s.name << " / " << signMethodName(method) << " / "
+                                  << (stencil ? "cubic26" : "default") << ": max error " << max_err / h << " voxels";
       EXPECT_EQ(sign_errors, 0) << s.name << " / " << signMethodName(method);
     }
   }
@@ -198,20 +209,24 @@ TEST(MeshSeedsTest, LimitDropsFartherBandVoxelsAndBandIsDeterministic) {
   EXPECT_GT(a.band.size(), 100u);
 }
 
-// Real meshes, sampled voxels against brute force. Exact-feature: most voxels exact up to float rounding; the
-// engine's triangle-id propagation misses the true closest triangle on a few voxels (measured: 0.1 % on the
-// bunny, ~8 % on the fandisk's long thin triangles) by at most ~0.02 voxel — far below OpenVDB's 0.2-0.7.
-// The paper's CP + PQ propagation stays within a voxel. Pseudonormal signs agree with the winding number.
+// Real meshes, sampled voxels against brute force. Exact-feature with cubic26: most voxels exact up to float
+// rounding; the engine's triangle-id propagation misses the true closest triangle on a few voxels (measured: 0.1 %
+// on the bunny, ~8 % on the fandisk's long thin triangles) by at most ~0.02 voxel — far below OpenVDB's 0.2-0.7.
+// With the default fcc12 at this coarse resolution: up to ~0.11 voxel, on ~25 % of the fandisk's voxels. The
+// paper's CP + PQ propagation stays within a voxel. Pseudonormal signs agree with the winding number.
 TEST(MeshSeedsTest, RealMeshesMatchBruteForceAndWindingSign) {
   for (const char* name : {"bunny.obj", "fandisk.off"}) {
     const TriangleMesh mesh = load(name);
     const Grid grid = gridFor(mesh, 64, 3);
     const double h = grid.voxelSize();
-    for (MeshSiteMode mode : {MeshSiteMode::kExactFeature, MeshSiteMode::kPaper}) {
+    for (int variant = 0; variant < 3; ++variant) {
+      const MeshSiteMode mode = variant == 2 ? MeshSiteMode::kPaper : MeshSiteMode::kExactFeature;
+      const bool cubic26 = variant == 0;
       MeshSeedOptions so;
       so.mode = mode;
-      const DenseField field = compute(grid, mesh, so, 12.0,
-                                       mode == MeshSiteMode::kPaper ? PropagationMode::kPaper : PropagationMode::kExact);
+      const DenseField field =
+          compute(grid, mesh, so, 12.0, mode == MeshSiteMode::kPaper ? PropagationMode::kPaper : PropagationMode::kExact,
+                  cubic26 ? std::optional<StencilKind>(StencilKind::kCubic26) : std::nullopt);
       const std::vector<Coord> voxels = sample(field, 1500);
       ASSERT_EQ(voxels.size(), 1500u);
       double max_err = 0;
@@ -225,11 +240,13 @@ TEST(MeshSeedsTest, RealMeshesMatchBruteForceAndWindingSign) {
         inexact += err > 1e-4;
         if (brute > 1e-3 * h && (got < 0) != (bruteWinding(mesh, w) > 0.5)) ++sign_errors;
       }
-      if (mode == MeshSiteMode::kExactFeature) {
-        EXPECT_LT(max_err, 0.05) << name << " exact-feature max error (voxels)";
-        EXPECT_LT(inexact, 0.15 * voxels.size()) << name << " exact-feature voxels off by > 1e-4 voxel";
-      }
-      else
+      if (mode == MeshSiteMode::kExactFeature && cubic26) {
+        EXPECT_LT(max_err, 0.05) << name << " exact-feature cubic26 max error (voxels)";
+        EXPECT_LT(inexact, 0.15 * voxels.size()) << name << " exact-feature cubic26 voxels off by > 1e-4 voxel";
+      } else if (mode == MeshSiteMode::kExactFeature) {
+        EXPECT_LT(max_err, 0.15) << name << " exact-feature default max error (voxels)";
+        EXPECT_LT(inexact, 0.35 * voxels.size()) << name << " exact-feature default voxels off by > 1e-4 voxel";
+      } else
         EXPECT_LT(max_err, 1.0) << name << " paper max error (voxels)";
       EXPECT_EQ(sign_errors, 0) << name << " / " << meshSiteModeName(mode);
     }
