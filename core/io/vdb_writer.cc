@@ -7,6 +7,8 @@
 #include <fmt/format.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/SignedFloodFill.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include "core/io/vdb_reader.h"
 
@@ -52,7 +54,33 @@ void VdbFieldBuilder::add(const Brick& brick) {
 }
 
 void VdbFieldBuilder::add(const SegmentBricks& segment) {
-  for (const Brick& b : segment.bricks) add(b);
+  // The tree is only changed (leaves created) on this thread; filling the leaves, which have the bricks' layout
+  // (offset (x<<6)|(y<<3)|z, bit i of the mask = voxel i), is then independent per leaf.
+  using Leaf = openvdb::FloatTree::LeafNodeType;
+  const size_t n = segment.bricks.size();
+  std::vector<Leaf*> leaves(n, nullptr);
+  for (size_t i = 0; i < n; ++i) {
+    const Brick& b = segment.bricks[i];
+    if (!b.mask.empty()) leaves[i] = impl_->accessor.touchLeaf(openvdb::Coord(b.origin.x, b.origin.y, b.origin.z));
+  }
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      Leaf* leaf = leaves[i];
+      if (!leaf) continue;
+      const Brick& brick = segment.bricks[i];
+      float* data = leaf->buffer().data();
+      auto& mask = leaf->getValueMask();
+      for (int w = 0; w < kBrickVoxels / 64; ++w) {
+        uint64_t bits = brick.mask.words[w];
+        mask.template getWord<uint64_t>(w) |= bits;
+        while (bits) {
+          const int v = w * 64 + std::countr_zero(bits);
+          bits &= bits - 1;
+          data[v] = brick.values[v];
+        }
+      }
+    }
+  });
 }
 
 void VdbFieldBuilder::finish() {

@@ -6,7 +6,8 @@
 // holds one grid named "distance", class GRID_LEVEL_SET, with the linear transform voxel size h and translation
 // = grid origin (so voxel (i,j,k) is at origin + h*(i,j,k), as in core/grid.h). write() goes through
 // `path + ".tmp"` and a rename, so a reader never sees a half-written file. Not thread-safe; one builder per
-// output. The embedded CLI and the service's client both stream bricks into it.
+// output (add(segment) fills the segment's leaves in parallel on the caller's TBB arena). The embedded CLI and the
+// service's client both stream bricks into it.
 #pragma once
 
 #include <cstdint>
