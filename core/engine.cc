@@ -327,6 +327,7 @@ class BandRun {
   template <bool kPoints>
   void pushFromT(const FrontEntry& e, ThreadBuffers& tb);
   void insertBand();
+  void stepFromBand();
   void step(FrontList& front);
   bool isBoundary(const Coord& q, uint64_t k) const;
   void scanAndCheck();
@@ -546,9 +547,30 @@ void BandRun::insertBand() {
       const uint32_t bi = brickIndex(v.voxel.x, v.voxel.y, v.voxel.z);
       BrickState* b = getOrCreate(bi, tb);
       const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
-      // Band voxels are first touched at step 0; kNoSite voxels (distance 0, nothing to offer) never push.
-      if (offer(b, bi, off, packKey(d2, band_dir, site), site != kNoSiteKey, tb) && seeds_.band_exact)
+      // Band voxels are first touched at step 0; kNoSite voxels (distance 0, nothing to offer) never push. An exact
+      // band is not listed: its first push is made from the band list itself (stepFromBand).
+      if (offer(b, bi, off, packKey(d2, band_dir, site), site != kNoSiteKey && !seeds_.band_exact, tb) &&
+          seeds_.band_exact)
         b->exact.set(off);
+    }
+  });
+}
+
+// The first step of an exact band: every band voxel offers its site, read from the band list (its key cannot have
+// changed), so the band never goes through the front lists. All band voxels push, also those a stencil does not
+// propagate from (fcc12's odd half): exact sites are the best candidates there are.
+void BandRun::stepFromBand() {
+  const auto& band = seeds_.band;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+    ThreadBuffers& tb = buffers_.local();
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const BandVoxel& v = band[i];
+      if (v.site == kNoSite) continue;
+      const uint32_t bi = brickIndex(v.voxel.x, v.voxel.y, v.voxel.z);
+      const BrickState* b = table_[bi].load(std::memory_order_relaxed);
+      const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
+      if (!b || keySite(b->key[off].load(std::memory_order_relaxed)) != v.site) continue;  // beyond the limit
+      pushFrom({bi, uint16_t(off), uint8_t(kExactDir), v.site}, tb);
     }
   });
 }
@@ -995,8 +1017,15 @@ EngineResult BandRun::run() {
   bucket_vox_ =
       opt_.mode == PropagationMode::kExact && seeds_.siteCount() >= kBucketMinSites ? kBucketVoxels : 0.0;
   insertBand();
-  if (owned_band_) std::vector<BandVoxel>().swap(*owned_band_);
-  FrontList front = gatherFront();
+  const bool push_band = seeds_.band_exact;  // first step from the band list, in segment 0 (below)
+  FrontList front;
+  auto releaseBand = [&] {
+    if (owned_band_) std::vector<BandVoxel>().swap(*owned_band_);
+  };
+  if (!push_band) {
+    releaseBand();
+    front = gatherFront();
+  }
 
   for (int seg = 0;; ++seg) {
     const auto ts = Clock::now();
@@ -1027,6 +1056,13 @@ EngineResult BandRun::run() {
     // The outer boundary of the finished region seeds this segment: every offer held back, replayed with the site
     // it offered then (the voxel may hold a better one for itself now, but not for its neighbours).
     if (seg > 0) front = takeDeferred();
+    if (seg == 0 && push_band && !(opt_.interrupted && opt_.interrupted())) {
+      ++step_;
+      ++stats.steps;
+      stepFromBand();
+      releaseBand();
+      front = gatherFront();
+    }
     for (;;) {
       if (opt_.interrupted && opt_.interrupted()) {
         result.interrupted = true;
