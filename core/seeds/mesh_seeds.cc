@@ -408,6 +408,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
     for (int o = 0; o < kBrickVoxels; ++o)
       if (best_t[o] != kNoSite) v.push_back({borg + brickLocal(o), best_t[o]});
   });
+  const size_t scratch_bytes = cand.size() * sizeof(Candidate);
   std::vector<Candidate>().swap(cand);
   std::vector<size_t> band_at(nbricks + 1, 0);
   for (size_t b = 0; b < nbricks; ++b) band_at[b + 1] = band_at[b] + per_brick[b].size();
@@ -458,8 +459,8 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
     seeds.sign = [signer](Brick& brick, const uint32_t* sites) { signer->sign(brick, sites); };
   if (seeds.kind == SiteKind::kTriangle) seeds.triangles = std::move(tris);
   // The scan's temporaries (as large as the band) were freed in the worker threads' malloc arenas, which keep
-  // the pages; hand them back so the engine's bricks do not come on top of them.
-  ::malloc_trim(0);
+  // the pages; when that is a sizeable amount, hand them back so the engine's bricks do not come on top of them.
+  if (scratch_bytes + seeds.band.size() * sizeof(BandVoxel) >= (size_t(64) << 20)) ::malloc_trim(0);
 
   if (stats) {
     stats->band_voxels = static_cast<int64_t>(seeds.band.size());
