@@ -110,7 +110,9 @@ constexpr double kLimitSlackVoxels = 1.0;
 // later improvement is propagated again. Admitting offers in distance slices of this width (replaying the held-back
 // ones when a slice's front empties) brings them in nearly nearest-first: about half the updates for meshes and
 // volumes. With few sites there is little to gain and the replays would cost, so it starts at kBucketMinSites.
+// Triangle sites (fcc12 by default) do best with wider slices: 5-10 % less time at 20- and 60-voxel bands than 4.
 constexpr double kBucketVoxels = 4.0;
+constexpr double kTriangleBucketVoxels = 8.0;
 constexpr size_t kBucketMinSites = 256;
 
 /// One bit per voxel of a brick. set() and clear() are atomic read-modify-writes (other threads may set other bits
@@ -1015,7 +1017,9 @@ EngineResult BandRun::run() {
   // Exact mode only: the paper's band keeps the paper's order (slices would also delay voxels past a lifespan
   // counted from the segment start).
   bucket_vox_ =
-      opt_.mode == PropagationMode::kExact && seeds_.siteCount() >= kBucketMinSites ? kBucketVoxels : 0.0;
+      opt_.mode != PropagationMode::kExact || seeds_.siteCount() < kBucketMinSites ? 0.0
+      : seeds_.kind == SiteKind::kTriangle                                         ? kTriangleBucketVoxels
+                                                                                   : kBucketVoxels;
   insertBand();
   const bool push_band = seeds_.band_exact;  // first step from the band list, in segment 0 (below)
   FrontList front;
