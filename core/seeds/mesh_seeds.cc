@@ -191,21 +191,20 @@ struct MeshSigner {
       double r2;
       bool inside;
     };
-    // A voxel farther from the surface than the brick is wide (plus a margin for rounding) sees no surface inside
-    // the brick: one sign test then signs every voxel of it. Most bricks beyond a few voxels are like this.
+    // Pseudonormal (closed meshes, whose sign only changes across the surface): a voxel farther from the surface
+    // than the brick is wide (plus a margin for rounding) sees no surface inside the brick, so one sign test signs
+    // every voxel of it. Most bricks beyond a few voxels are like this. Not for winding or parity, whose sign on an
+    // open mesh also changes across its holes, away from the surface.
     constexpr double kBrickDiameter = 7 * 1.7320508075688772 + 0.5;
     int far = -1;
-    for (int i = 0; i < kBrickVoxels && far < 0; ++i)
-      if (brick.mask.test(i) && std::abs(brick.values[i]) > kBrickDiameter * voxel_size &&
-          (method != SignMethod::kPseudonormal || sites[i] != kNoSite))
+    for (int i = 0; i < kBrickVoxels && far < 0 && method == SignMethod::kPseudonormal; ++i)
+      if (brick.mask.test(i) && sites[i] != kNoSite && std::abs(brick.values[i]) > kBrickDiameter * voxel_size)
         far = i;
     if (far >= 0) {
       const Coord c = brick.origin + brickLocal(far);
       const Vec3d p{double(c.x), double(c.y), double(c.z)};
-      const bool inside = method == SignMethod::kPseudonormal
-                              ? insidePseudonormal(p, triangleOf(sites[far]), std::abs(brick.values[far]) / voxel_size)
-                          : method == SignMethod::kWinding    ? winding->query(p) > 0.5
-                                                              : parity->inside(p);
+      const bool inside =
+          insidePseudonormal(p, triangleOf(sites[far]), std::abs(brick.values[far]) / voxel_size);
       if (inside)
         for (int i = 0; i < kBrickVoxels; ++i)
           if (brick.mask.test(i)) brick.values[i] = -std::abs(brick.values[i]);
