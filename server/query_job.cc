@@ -3,6 +3,9 @@
 #include <exception>
 #include <new>
 
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include "proto/brick_codec.h"
 #include "server/seed_builder.h"
 
@@ -73,29 +76,47 @@ void QueryJob::emitSegment(SegmentBricks&& segment) {
   const double compute_seconds = secondsBetween(last_callback_end_, Clock::now());
   const v1::BrickEncoding enc = query_.encoding;
   uint64_t voxels = 0, bricks = 0;
-  size_t i = 0;
   const size_t n = segment.bricks.size();
-  while (i < n && !cancelled_.load(std::memory_order_relaxed)) {
-    auto msg = std::make_unique<v1::QueryReply>();
-    v1::BrickBatch* batch = msg->mutable_bricks();
-    batch->set_segment(uint32_t(segment.index));
-    batch->set_lower(segment.lower_world);
-    batch->set_upper(segment.upper_world);
-    size_t bytes = 32;
-    // Always at least one brick per message; stop before exceeding the batch bound.
+  // Batches: always at least one brick per message; a batch stops before exceeding the byte bound.
+  struct Batch {
+    size_t begin, end, bytes;
+  };
+  std::vector<Batch> batches;
+  for (size_t i = 0; i < n;) {
+    Batch batch{i, i, 32};
     do {
       const Brick& b = segment.bricks[i];
       const int count = b.mask.count();
       const size_t need = encodedBrickBytes(count, enc);
-      if (batch->bricks_size() > 0 && bytes + need > query_.batch_bytes) break;
-      encodeBrick(b, enc, batch->add_bricks());
-      bytes += need;
+      if (batch.end > batch.begin && batch.bytes + need > query_.batch_bytes) break;
+      batch.bytes += need;
       voxels += uint64_t(count);
       value_bytes_ += need - 24;
       ++bricks;
-      ++i;
+      batch.end = ++i;
     } while (i < n);
-    if (!queue_.push(std::move(msg), bytes)) return;  // cancelled
+    batches.push_back(batch);
+  }
+  // Encoded in parallel on the query's arena (the engine waits for this callback anyway), a wave at a time so a
+  // large segment is never held encoded all at once; sent in order.
+  const size_t wave = 4 * size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+  std::vector<std::unique_ptr<v1::QueryReply>> messages;
+  for (size_t w0 = 0; w0 < batches.size() && !cancelled_.load(std::memory_order_relaxed); w0 += wave) {
+    const size_t w1 = std::min(batches.size(), w0 + wave);
+    messages.clear();
+    messages.resize(w1 - w0);
+    tbb::parallel_for(size_t(w0), w1, [&](size_t k) {
+      auto msg = std::make_unique<v1::QueryReply>();
+      v1::BrickBatch* batch = msg->mutable_bricks();
+      batch->set_segment(uint32_t(segment.index));
+      batch->set_lower(segment.lower_world);
+      batch->set_upper(segment.upper_world);
+      batch->mutable_bricks()->Reserve(int(batches[k].end - batches[k].begin));
+      for (size_t i = batches[k].begin; i < batches[k].end; ++i) encodeBrick(segment.bricks[i], enc, batch->add_bricks());
+      messages[k - w0] = std::move(msg);
+    });
+    for (size_t k = w0; k < w1; ++k)
+      if (!queue_.push(std::move(messages[k - w0]), batches[k].bytes)) return;  // cancelled
   }
   segment.bricks.clear();
   segment.bricks.shrink_to_fit();
