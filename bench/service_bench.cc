@@ -25,6 +25,7 @@
 #include <nlohmann/json.hpp>
 #include <tbb/task_arena.h>
 
+#include "bench/bench_util.h"
 #include "client/remote_client.h"
 #include "core/engine.h"
 #include "core/mesh/mesh_grid.h"
@@ -156,11 +157,6 @@ Remote runRemote(RemoteClient& client, const v1::QueryRequest& request, bool che
   return r;
 }
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
-
 }  // namespace
 }  // namespace distband
 
@@ -277,7 +273,7 @@ int main(int argc, char** argv) {
                    rm.result.summary.compute_seconds(), rm.result.first_bricks_seconds,
                    rm.result.summary.segments_size());
       }
-      const double ip = median(inproc), st = median(stream), fb = median(first);
+      const double ip = bench::median(inproc), st = bench::median(stream), fb = bench::median(first);
       md += fmt::format("| {} | {:.3f} | {:.3f} | {:.2f}x | {:.3f} | {:.1f} % | {:.1f} | {} |\n", c.name, ip, st,
                         st / ip, fb, 100 * fb / st, mb, equal ? "yes" : "NO");
       out["cases"].push_back({{"case", c.name}, {"in_process_s", ip}, {"stream_s", st}, {"ratio", st / ip},
