@@ -326,7 +326,7 @@ class BandRun {
   }
 
   void pushFrom(const FrontEntry& e, ThreadBuffers& tb);
-  template <bool kPoints>
+  template <bool kPoints, bool kExactBand>
   void pushFromT(const FrontEntry& e, ThreadBuffers& tb);
   void insertBand();
   void stepFromBand();
@@ -414,12 +414,15 @@ void BandRun::buildLinkTables() {
   }
 }
 
+// Specialised on the site kind and on whether the band is exact: the per-link tests they add cost point seeds ~5 %
+// of the push's instructions when compiled in unconditionally.
 void BandRun::pushFrom(const FrontEntry& e, ThreadBuffers& tb) {
-  if (seeds_.kind == SiteKind::kPoint) pushFromT<true>(e, tb);
-  else pushFromT<false>(e, tb);
+  const bool exact = seeds_.band_exact;
+  if (seeds_.kind == SiteKind::kPoint) exact ? pushFromT<true, true>(e, tb) : pushFromT<true, false>(e, tb);
+  else exact ? pushFromT<false, true>(e, tb) : pushFromT<false, false>(e, tb);
 }
 
-template <bool kPoints>
+template <bool kPoints, bool kExactBand>
 void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   // Members copied to locals: the atomics and buffer writes below would otherwise force reloads every link.
   BrickState* const pb = table_[e.brick].load(std::memory_order_relaxed);
@@ -455,13 +458,12 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   uint32_t known = 1u << 13;  // bit i: nbr_index[i] valid; 13 is this brick
   nbr_index[13] = e.brick;
   const Coord bcoord{pb->origin.x >> kBrickLog2, pb->origin.y >> kBrickLog2, pb->origin.z >> kBrickLog2};
-  const bool exact_band = seeds_.band_exact;
   bool deferred = false;
   // Decides on one target whose key was read as k.
   auto decide = [&](const Link& d, BrickState* gb, uint32_t gbi, uint64_t k) {
     const int goff = e.offset + d.offset;
     // The same site gives the same distance: nothing to offer; an exact band voxel takes nothing.
-    if (k != kUntouched && (keySite(k) == site || keyDir(k) == kExactDir)) return;
+    if (k != kUntouched && (keySite(k) == site || (kExactBand && keyDir(k) == kExactDir))) return;
     float d2;
     if constexpr (kPoints) {
       const double x = rel.x + d.fx, y = rel.y + d.fy, z = rel.z + d.fz;
@@ -516,7 +518,7 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
       if (gbi == kOutsideGrid) continue;
       gb = table_[gbi].load(std::memory_order_acquire);
     }
-    if (exact_band && gb && gb->exact.test(goff)) continue;
+    if (kExactBand && gb && gb->exact.test(goff)) continue;
     if (region_map && region_map[grid_.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
     const uint64_t k = gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched;
     if constexpr (kPoints) decide(d, gb, gbi, k);
