@@ -216,10 +216,10 @@ struct SiteMetric {
 class BandRun {
  public:
   BandRun(const Grid& grid, const Seeds& seeds, const EngineOptions& opt, const SegmentCallback& cb,
-          Seeds* owned)
+          std::vector<BandVoxel>* owned_band)
       : grid_(grid),
         seeds_(seeds),
-        owned_(owned),
+        owned_band_(owned_band),
         opt_(opt),
         cb_(cb),
         stencil_(Stencil::get(opt.stencil.value_or(defaultStencil(seeds.kind)))),
@@ -345,7 +345,7 @@ class BandRun {
 
   const Grid& grid_;
   const Seeds& seeds_;
-  Seeds* owned_;  // &seeds_ when the caller handed the seeds over: band lists are freed once used
+  std::vector<BandVoxel>* owned_band_;  // seeds_.band when the caller handed the seeds over: freed once inserted
   const EngineOptions& opt_;
   const SegmentCallback& cb_;
   const Stencil& stencil_;
@@ -541,10 +541,6 @@ void BandRun::insertBand() {
     if (v.site != kNoSite && v.site >= seeds_.siteCount())
       throw std::invalid_argument(fmt::format("band voxel names site {} of {}", v.site, seeds_.siteCount()));
   }
-  const std::vector<float>& known_key2 = seeds_.band_key2;
-  if (!known_key2.empty() && known_key2.size() != band.size())
-    throw std::invalid_argument(fmt::format("seeds.band_key2 has {} entries for {} band voxels", known_key2.size(),
-                                            band.size()));
   step_ = 0;
   const uint32_t band_dir = seeds_.band_exact ? kExactDir : kNoDirection;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
@@ -552,7 +548,7 @@ void BandRun::insertBand() {
     for (size_t i = r.begin(); i != r.end(); ++i) {
       const BandVoxel& v = band[i];
       const uint32_t site = toKeySite(v.site);
-      const float d2 = known_key2.empty() ? metric_.key2(site, v.voxel.x, v.voxel.y, v.voxel.z) : known_key2[i];
+      const float d2 = metric_.key2(site, v.voxel.x, v.voxel.y, v.voxel.z);
       if (d2 > limit2) continue;
       const uint32_t bi = brickIndex(v.voxel.x, v.voxel.y, v.voxel.z);
       BrickState* b = getOrCreate(bi, tb);
@@ -1029,11 +1025,10 @@ EngineResult BandRun::run() {
       : seeds_.kind == SiteKind::kTriangle                                         ? kTriangleBucketVoxels
                                                                                    : kBucketVoxels;
   insertBand();
-  if (owned_) std::vector<float>().swap(owned_->band_key2);
   const bool push_band = seeds_.band_exact;  // first step from the band list, in segment 0 (below)
   FrontList front;
   auto releaseBand = [&] {
-    if (owned_) std::vector<BandVoxel>().swap(owned_->band);
+    if (owned_band_) std::vector<BandVoxel>().swap(*owned_band_);
   };
   if (!push_band) {
     releaseBand();
@@ -1129,13 +1124,13 @@ EngineResult BandRun::run() {
 namespace {
 
 EngineResult runEngine(const Grid& grid, const Seeds& seeds, const EngineOptions& options,
-                       const SegmentCallback& on_segment, Seeds* owned) {
+                       const SegmentCallback& on_segment, std::vector<BandVoxel>* owned_band) {
   if (std::string e = validateOptions(grid, options); !e.empty()) throw std::invalid_argument(e);
   if (seeds.region && seeds.region->size() != size_t(grid.voxelCount()))
     throw std::invalid_argument("seeds.region must hold one label per grid voxel");
   EngineResult result;
   auto body = [&] {
-    BandRun run(grid, seeds, options, on_segment, owned);
+    BandRun run(grid, seeds, options, on_segment, owned_band);
     result = run.run();
   };
   if (options.threads > 0) {
@@ -1157,7 +1152,7 @@ EngineResult computeDistanceField(const Grid& grid, const Seeds& seeds, const En
 EngineResult computeDistanceField(const Grid& grid, Seeds&& seeds, const EngineOptions& options,
                                   const SegmentCallback& on_segment) {
   Seeds owned = std::move(seeds);
-  return runEngine(grid, owned, options, on_segment, &owned);
+  return runEngine(grid, owned, options, on_segment, &owned.band);
 }
 
 }  // namespace distband

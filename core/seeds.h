@@ -39,12 +39,9 @@ struct Seeds {
   std::vector<Vec3d> points;                    ///< kPoint sites, index space
   std::vector<std::array<Vec3d, 3>> triangles;  ///< kTriangle sites, index space
   std::vector<BandVoxel> band;
-  /// True when every band voxel's site is already its closest site (mesh seeds): the engine then never offers
-  /// anything to band voxels, which saves most of the work of thin bands.
+  /// True when every band voxel's site is already its closest site (mesh and volume seeds): the engine then
+  /// never offers anything to band voxels, which saves most of the work of thin bands.
   bool band_exact = false;
-  /// Optional, one per band voxel: its squared distance to its site (voxels²) rounded to float exactly as the engine
-  /// computes it, when the seed source has it already (mesh seeds, exact-feature). Empty: the engine computes it.
-  std::vector<float> band_key2;
   std::shared_ptr<const std::vector<uint8_t>> region;  ///< null, or grid.voxelCount() labels
   /// Signs the masked values of `brick` in place; `sites[i]` is the site of voxel offset i (kNoSite if none).
   std::function<void(Brick& brick, const uint32_t* sites)> sign;

@@ -355,11 +355,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   const size_t nbricks = starts.size() - 1;
 
   // 2. Per brick: each voxel's closest triangle among its candidates, kept when within the radius.
-  struct Found {
-    BandVoxel voxel;
-    float key2;  // squared distance to its triangle, rounded as the engine's key
-  };
-  std::vector<std::vector<Found>> per_brick(nbricks);
+  std::vector<std::vector<BandVoxel>> per_brick(nbricks);
   tbb::parallel_for(size_t(0), nbricks, [&](size_t b) {
     const int64_t key = cand[starts[b]].brick;
     const Coord borg{int32_t(key % bd.x) * kBrickSize, int32_t((key / bd.x) % bd.y) * kBrickSize,
@@ -409,7 +405,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
     }
     auto& v = per_brick[b];
     for (int o = 0; o < kBrickVoxels; ++o)
-      if (best_t[o] != kNoSite) v.push_back({{borg + brickLocal(o), best_t[o]}, float(best[o])});
+      if (best_t[o] != kNoSite) v.push_back({borg + brickLocal(o), best_t[o]});
   });
   const size_t scratch_bytes = cand.size() * sizeof(Candidate);
   std::vector<Candidate>().swap(cand);
@@ -419,16 +415,11 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   Seeds seeds;
   seeds.band_exact = true;  // each band voxel's closest triangle among all within the radius: its closest overall
   seeds.band.resize(band_at[nbricks]);
-  // Exact-feature sites are the triangles themselves: the scan's distances are the engine's keys (same formula).
-  if (options.mode == MeshSiteMode::kExactFeature) seeds.band_key2.resize(band_at[nbricks]);
   tbb::parallel_for(size_t(0), nbricks, [&](size_t b) {
-    for (size_t i = 0; i < per_brick[b].size(); ++i) {
-      seeds.band[band_at[b] + i] = per_brick[b][i].voxel;
-      if (!seeds.band_key2.empty()) seeds.band_key2[band_at[b] + i] = per_brick[b][i].key2;
-    }
-    std::vector<Found>().swap(per_brick[b]);
+    std::copy(per_brick[b].begin(), per_brick[b].end(), seeds.band.begin() + band_at[b]);
+    std::vector<BandVoxel>().swap(per_brick[b]);
   });
-  std::vector<std::vector<Found>>().swap(per_brick);
+  std::vector<std::vector<BandVoxel>>().swap(per_brick);
 
   auto signer = std::make_shared<MeshSigner>();
   signer->voxel_size = grid.voxelSize();
@@ -468,7 +459,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   if (seeds.kind == SiteKind::kTriangle) seeds.triangles = std::move(tris);
   // The scan's temporaries (as large as the band) were freed in the worker threads' malloc arenas, which keep
   // the pages; when that is a sizeable amount, hand them back so the engine's bricks do not come on top of them.
-  if (scratch_bytes + seeds.band.size() * sizeof(Found) >= (size_t(64) << 20)) ::malloc_trim(0);
+  if (scratch_bytes + seeds.band.size() * sizeof(BandVoxel) >= (size_t(64) << 20)) ::malloc_trim(0);
 
   if (stats) {
     stats->band_voxels = static_cast<int64_t>(seeds.band.size());
