@@ -87,8 +87,6 @@ constexpr uint32_t kSiteMask = (1u << kSiteBits) - 1;
 constexpr uint32_t kNoSiteKey = kSiteMask;  // kNoSite in the key
 constexpr uint32_t kMaxSites = kSiteMask;   // site ids must stay below this
 constexpr uint32_t kNoDirection = 31;
-// Band voxels of a Seeds::band_exact band hold their closest site: they offer like kNoDirection but take no offers.
-constexpr uint32_t kExactDir = 30;
 
 inline uint64_t packKey(float d2, uint32_t dir, uint32_t site) {
   return (uint64_t(std::bit_cast<uint32_t>(d2)) << 32) | (uint64_t(site) << 5) | dir;
@@ -193,7 +191,7 @@ struct ThreadBuffers {
   FrontList next;       // voxels changed in this step (site filled in after the step)
   FrontList deferred;   // offers held back beyond the admission threshold (voxel, site)
   std::vector<uint32_t> pending;      // bricks that got their first unemitted voxel
-  std::vector<BrickState*> allocated;
+  int64_t bricks = 0;  // allocated by this thread
   std::vector<std::pair<VoxelRef, uint64_t>> corrections;
   std::vector<VoxelRef> dirty;        // changed since the last correction round (exact mode)
   int64_t updates = 0;
@@ -285,7 +283,7 @@ class BandRun {
     if (b) return b;
     auto* fresh = new BrickState(brickOrigin(bi), use_lifespan_);
     if (table_[bi].compare_exchange_strong(b, fresh, std::memory_order_acq_rel)) {
-      tb.allocated.push_back(fresh);
+      ++tb.bricks;
       return fresh;
     }
     delete fresh;
@@ -396,11 +394,11 @@ void BandRun::buildLinkTables() {
   for (int c = 0; c < 27; ++c) {
     const Coord src{rep_local[c % 3], rep_local[(c / 3) % 3], rep_local[c / 9]};
     for (uint32_t dir = 0; dir < 32; ++dir) {
-      if (dir != kNoDirection && dir != kExactDir && dir >= sl.size()) continue;
+      if (dir != kNoDirection && dir >= sl.size()) continue;
       for (Link link : links_) {
         // The source received its site along link `dir` from Q = source - sl[dir], which offered the same site
         // to all of its own links one step earlier: a target that is one of them (or Q) gains nothing.
-        if (dir != kNoDirection && dir != kExactDir) {
+        if (dir != kNoDirection) {
           const Coord& u = sl[dir];
           if (isLinkOrZero({link.x + u.x, link.y + u.y, link.z + u.z})) continue;
         }
@@ -414,8 +412,8 @@ void BandRun::buildLinkTables() {
   }
 }
 
-// Specialised on the site kind and on whether the band is exact: the per-link tests they add cost point seeds ~5 %
-// of the push's instructions when compiled in unconditionally.
+// Specialised on the site kind and on whether the band is exact: the exact-band test on every link cost point seeds
+// ~5 % of the push's instructions when compiled in unconditionally.
 void BandRun::pushFrom(const FrontEntry& e, ThreadBuffers& tb) {
   const bool exact = seeds_.band_exact;
   if (seeds_.kind == SiteKind::kPoint) exact ? pushFromT<true, true>(e, tb) : pushFromT<true, false>(e, tb);
@@ -462,8 +460,8 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   // Decides on one target whose key was read as k.
   auto decide = [&](const Link& d, BrickState* gb, uint32_t gbi, uint64_t k) {
     const int goff = e.offset + d.offset;
-    // The same site gives the same distance: nothing to offer; an exact band voxel takes nothing.
-    if (k != kUntouched && (keySite(k) == site || (kExactBand && keyDir(k) == kExactDir))) return;
+    // The same site gives the same distance: nothing to offer (exact band voxels were skipped before their key).
+    if (k != kUntouched && keySite(k) == site) return;
     float d2;
     if constexpr (kPoints) {
       const double x = rel.x + d.fx, y = rel.y + d.fy, z = rel.z + d.fz;
@@ -542,7 +540,6 @@ void BandRun::insertBand() {
       throw std::invalid_argument(fmt::format("band voxel names site {} of {}", v.site, seeds_.siteCount()));
   }
   step_ = 0;
-  const uint32_t band_dir = seeds_.band_exact ? kExactDir : kNoDirection;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
     ThreadBuffers& tb = buffers_.local();
     for (size_t i = r.begin(); i != r.end(); ++i) {
@@ -555,7 +552,7 @@ void BandRun::insertBand() {
       const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
       // Band voxels are first touched at step 0; kNoSite voxels (distance 0, nothing to offer) never push. An exact
       // band is not listed: its first push is made from the band list itself (stepFromBand).
-      if (offer(b, bi, off, packKey(d2, band_dir, site), site != kNoSiteKey && !seeds_.band_exact, tb) &&
+      if (offer(b, bi, off, packKey(d2, kNoDirection, site), site != kNoSiteKey && !seeds_.band_exact, tb) &&
           seeds_.band_exact)
         b->exact.set(off);
     }
@@ -576,7 +573,7 @@ void BandRun::stepFromBand() {
       const BrickState* b = table_[bi].load(std::memory_order_relaxed);
       const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
       if (!b || keySite(b->key[off].load(std::memory_order_relaxed)) != v.site) continue;  // beyond the limit
-      pushFrom({bi, uint16_t(off), uint8_t(kExactDir), v.site}, tb);
+      pushFrom({bi, uint16_t(off), uint8_t(kNoDirection), v.site}, tb);
     }
   });
 }
@@ -661,10 +658,8 @@ void BandRun::scanAndCheck() {
                         b->origin.z + kBrickSize > dims_.z;
       for (int off = 0; off < kBrickVoxels; ++off) {
         const uint64_t k = b->key[off].load(std::memory_order_relaxed);
-        if (k == kUntouched || keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey ||
-            keyDir(k) == kExactDir)
-          continue;
-        if (b->emitted.test(off)) continue;
+        if (k == kUntouched || keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey) continue;
+        if (b->emitted.test(off) || b->exact.test(off)) continue;
         const Coord l = brickLocal(off);
         const Coord q = b->origin + l;
         const uint32_t site = keySite(k);
@@ -747,7 +742,7 @@ FrontList BandRun::correct(bool first_round) {
     aroundDirty([&](BrickState* b, uint32_t bi, int off, const Coord& q) {
       if (!b->queued.set(off)) return;
       const uint64_t k = b->key[off].load(std::memory_order_relaxed);
-      if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey || keyDir(k) == kExactDir ||
+      if (keyDist2(k) > thr2_ || keyDist2(k) <= frozen2_ || keySite(k) == kNoSiteKey || b->exact.test(off) ||
           !isBoundary(q, k))
         return;
       uint64_t block[125];
@@ -1113,7 +1108,7 @@ EngineResult BandRun::run() {
   result.corrections = corrections_;
   for (auto& tb : buffers_) {
     result.updates += tb.updates;
-    result.bricks_allocated += int64_t(tb.allocated.size());
+    result.bricks_allocated += tb.bricks;
   }
   result.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return result;
