@@ -303,10 +303,12 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   const size_t nt = mesh.triangles.size();
   if (nt >= kNoSite) return "too many triangles";
 
+  std::vector<Vec3d> verts(mesh.vertices.size());  // index space
+  for (size_t v = 0; v < verts.size(); ++v) verts[v] = grid.indexOf(mesh.vertices[v]);
   std::vector<std::array<Vec3d, 3>> tris(nt);
   std::vector<Vec3d> normals(nt);
   for (size_t t = 0; t < nt; ++t) {
-    for (int k = 0; k < 3; ++k) tris[t][k] = grid.indexOf(mesh.vertices[mesh.triangles[t][k]]);
+    for (int k = 0; k < 3; ++k) tris[t][k] = verts[mesh.triangles[t][k]];
     normals[t] = normalized((tris[t][1] - tris[t][0]).cross(tris[t][2] - tris[t][0]));
   }
   const double radius = std::min(options.band_radius_voxels, options.limit_voxels);
@@ -443,8 +445,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   switch (options.sign) {
     case SignMethod::kUnsigned: break;
     case SignMethod::kPseudonormal:
-      signer->verts.resize(mesh.vertices.size());
-      for (size_t v = 0; v < mesh.vertices.size(); ++v) signer->verts[v] = grid.indexOf(mesh.vertices[v]);
+      signer->verts = std::move(verts);
       signer->corners = mesh.triangles;
       buildPseudonormals(signer.get());
       break;
