@@ -40,23 +40,35 @@ VdbFieldBuilder::VdbFieldBuilder(const Grid& grid, float background) {
 
 VdbFieldBuilder::~VdbFieldBuilder() = default;
 
-void VdbFieldBuilder::add(const Brick& brick) {
-  if (brick.mask.empty()) return;
-  auto* leaf = impl_->accessor.touchLeaf(openvdb::Coord(brick.origin.x, brick.origin.y, brick.origin.z));
+namespace {
+
+using Leaf = openvdb::FloatTree::LeafNodeType;
+
+// The leaf has the brick's layout (offset (x<<6)|(y<<3)|z, bit i of the mask = voxel i): the masked values are
+// copied and switched on word by word. Touches this leaf only.
+void fillLeaf(Leaf* leaf, const Brick& brick) {
+  float* data = leaf->buffer().data();
+  auto& mask = leaf->getValueMask();
   for (int w = 0; w < kBrickVoxels / 64; ++w) {
     uint64_t bits = brick.mask.words[w];
+    mask.template getWord<uint64_t>(w) |= bits;
     while (bits) {
-      const int i = w * 64 + std::countr_zero(bits);
+      const int v = w * 64 + std::countr_zero(bits);
       bits &= bits - 1;
-      leaf->setValueOn(static_cast<openvdb::Index>(i), brick.values[i]);
+      data[v] = brick.values[v];
     }
   }
 }
 
+}  // namespace
+
+void VdbFieldBuilder::add(const Brick& brick) {
+  if (brick.mask.empty()) return;
+  fillLeaf(impl_->accessor.touchLeaf(openvdb::Coord(brick.origin.x, brick.origin.y, brick.origin.z)), brick);
+}
+
 void VdbFieldBuilder::add(const SegmentBricks& segment) {
-  // The tree is only changed (leaves created) on this thread; filling the leaves, which have the bricks' layout
-  // (offset (x<<6)|(y<<3)|z, bit i of the mask = voxel i), is then independent per leaf.
-  using Leaf = openvdb::FloatTree::LeafNodeType;
+  // The tree is only changed (leaves created) on this thread; filling the leaves is then independent per leaf.
   const size_t n = segment.bricks.size();
   std::vector<Leaf*> leaves(n, nullptr);
   for (size_t i = 0; i < n; ++i) {
@@ -64,22 +76,8 @@ void VdbFieldBuilder::add(const SegmentBricks& segment) {
     if (!b.mask.empty()) leaves[i] = impl_->accessor.touchLeaf(openvdb::Coord(b.origin.x, b.origin.y, b.origin.z));
   }
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i != r.end(); ++i) {
-      Leaf* leaf = leaves[i];
-      if (!leaf) continue;
-      const Brick& brick = segment.bricks[i];
-      float* data = leaf->buffer().data();
-      auto& mask = leaf->getValueMask();
-      for (int w = 0; w < kBrickVoxels / 64; ++w) {
-        uint64_t bits = brick.mask.words[w];
-        mask.template getWord<uint64_t>(w) |= bits;
-        while (bits) {
-          const int v = w * 64 + std::countr_zero(bits);
-          bits &= bits - 1;
-          data[v] = brick.values[v];
-        }
-      }
-    }
+    for (size_t i = r.begin(); i != r.end(); ++i)
+      if (leaves[i]) fillLeaf(leaves[i], segment.bricks[i]);
   });
 }
 
