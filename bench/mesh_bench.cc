@@ -582,7 +582,8 @@ int main(int argc, char** argv) {
   app.add_option("--padding", o.padding, "padding (voxels) of the Table 1 grid");
   app.add_option("--segment", o.segment, "l_seg (voxels) of the segmented Table 1 rows");
   app.add_option("--stencil", o.stencil, "engine stencil: auto (the product default) | cubic26 | cubic18 | cubic6 | fcc12");
-  app.add_option("--case", o.run_case, "memory-distband | memory-openvdb: one memory row in this process");
+  app.add_option("--case", o.run_case,
+                 "memory-distband | memory-distband-discard | memory-seeds | memory-openvdb: one memory row in this process");
   app.add_option("--memory-mesh", o.memory_mesh, "mesh of the memory case");
   app.add_option("--memory-res", o.memory_resolution, "resolution of the memory case");
   app.add_option("--memory-half-width", o.memory_half_width, "half-width of the memory case");
