@@ -10,6 +10,7 @@ uint64_t Asset::memoryBytes() const {
   uint64_t bytes = sizeof(Asset) + id.size() + name.size();
   if (mesh) bytes += mesh->vertices.size() * sizeof(Vec3d) + mesh->triangles.size() * sizeof(mesh->triangles[0]);
   if (mask) bytes += mask->size();
+  if (footprint) bytes += footprint->memoryBytes();
   return bytes;
 }
 

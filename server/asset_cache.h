@@ -18,6 +18,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "core/band_extent.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/types.h"
 
@@ -34,6 +35,7 @@ struct Asset {
   // kVolume: dims.x*dims.y*dims.z bytes, x fastest, nonzero = seed
   Coord dims{};
   std::shared_ptr<const std::vector<uint8_t>> mask;
+  std::shared_ptr<const VolumeFootprint> footprint;  ///< seed and boundary voxels (admission estimates)
 
   uint64_t memoryBytes() const;  ///< what the asset costs the cache
 };

@@ -4,7 +4,7 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 
 #include <fmt/format.h>
@@ -24,11 +24,11 @@ std::string_view meshFormatExtension(v1::MeshFormat format) {
   }
 }
 
-std::string checkDims(const v1::Dims& d, std::string_view field) {
+Status checkDims(const v1::Dims& d, std::string_view field) {
   for (auto [axis, v] : {std::pair{"x", d.x()}, {"y", d.y()}, {"z", d.z()}})
     if (v < 1 || v > uint32_t(kMaxGridDim))
-      return fmt::format("{}.{} must be in [1, {}] (got {})", field, axis, kMaxGridDim, v);
-  return {};
+      return Status::InvalidArgument(fmt::format("{}.{} must be in [1, {}] (got {})", field, axis, kMaxGridDim, v));
+  return Status::Ok();
 }
 
 std::string meshAssetId(std::string_view bytes, v1::MeshFormat format) {
@@ -80,56 +80,68 @@ std::string replaceAll(std::string s, const std::string& from, const std::string
 
 }  // namespace
 
-grpc::Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::string& name,
-                            std::string_view field, std::shared_ptr<const Asset>* out) {
+uint64_t meshParsePeakBytes(uint64_t input_bytes) { return 64 * input_bytes + (uint64_t(1) << 20); }
+
+Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::string& name, std::string_view field,
+                      const MeshLimits& limits, const Interrupter* interrupter, std::shared_ptr<const Asset>* out) {
   const std::string_view ext = meshFormatExtension(format);
   if (ext.empty())
-    return {grpc::StatusCode::INVALID_ARGUMENT,
-            fmt::format("{}.format must be one of MESH_FORMAT_OBJ, _OFF, _PLY, _STL (got {})", field, int(format))};
-  if (bytes.empty())
-    return {grpc::StatusCode::INVALID_ARGUMENT, fmt::format("{}: the mesh data is empty", field)};
+    return Status::InvalidArgument(
+        fmt::format("{}.format must be one of MESH_FORMAT_OBJ, _OFF, _PLY, _STL (got {})", field, int(format)));
+  if (bytes.empty()) return Status::InvalidArgument(fmt::format("{}: the mesh data is empty", field));
+  if (isInterrupted(interrupter)) return interrupter->status();
   TempFile file;
-  if (std::string e = file.create(bytes, ext); !e.empty()) return {grpc::StatusCode::INTERNAL, e};
+  if (std::string e = file.create(bytes, ext); !e.empty()) return Status::Internal(e);
   auto asset = std::make_shared<Asset>();
   auto mesh = std::make_shared<TriangleMesh>();
   std::string error = loadMesh(file.path(), mesh.get(), &asset->mesh_report);
   if (!error.empty()) {
-    // Name the upload, not our temporary file.
     error = replaceAll(error, file.path(), name.empty() ? std::string("mesh") : name);
-    return {grpc::StatusCode::INVALID_ARGUMENT, fmt::format("{}: {}", field, error)};
+    return Status::InvalidArgument(fmt::format("{}: {}", field, error));
   }
+  if (uint64_t(asset->mesh_report.triangles) > limits.max_triangles)
+    return Status::ResourceExhausted(fmt::format("{}: the mesh has {} triangles, more than the server's limit of {}",
+                                                 field, asset->mesh_report.triangles, limits.max_triangles));
+  if (uint64_t(asset->mesh_report.vertices) > limits.max_vertices)
+    return Status::ResourceExhausted(fmt::format("{}: the mesh has {} vertices, more than the server's limit of {}",
+                                                 field, asset->mesh_report.vertices, limits.max_vertices));
   asset->kind = Asset::Kind::kMesh;
   asset->id = meshAssetId(bytes, format);
   asset->name = name;
   asset->mesh = std::move(mesh);
   *out = std::move(asset);
-  return grpc::Status::OK;
+  return Status::Ok();
 }
 
-grpc::Status parseVolumeAsset(const v1::Dims& dims, std::string bytes, const std::string& name,
-                              std::string_view field, uint64_t max_voxels, std::shared_ptr<const Asset>* out) {
-  if (std::string e = checkDims(dims, fmt::format("{}.dims", field)); !e.empty())
-    return {grpc::StatusCode::INVALID_ARGUMENT, e};
+uint64_t volumeParsePeakBytes(uint64_t voxels) { return voxels + voxels / 256 + (uint64_t(1) << 16); }
+
+Status parseVolumeAsset(const v1::Dims& dims, std::string bytes, const std::string& name, std::string_view field,
+                        uint64_t max_voxels, const Interrupter* interrupter, std::shared_ptr<const Asset>* out) {
+  if (Status s = checkDims(dims, fmt::format("{}.dims", field)); !s.ok()) return s;
   const uint64_t voxels = uint64_t(dims.x()) * dims.y() * dims.z();
   if (voxels > max_voxels)
-    return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-            fmt::format("{}.dims: {}x{}x{} = {} voxels exceeds the server's voxel budget of {}", field, dims.x(),
-                        dims.y(), dims.z(), voxels, max_voxels)};
+    return Status::ResourceExhausted(fmt::format("{}.dims: {}x{}x{} = {} voxels exceeds the server's voxel budget of {}",
+                                                 field, dims.x(), dims.y(), dims.z(), voxels, max_voxels));
   if (bytes.size() != voxels)
-    return {grpc::StatusCode::INVALID_ARGUMENT,
-            fmt::format("{}: the mask has {} bytes but dims {}x{}x{} need exactly {} (one byte per voxel)", field,
-                        bytes.size(), dims.x(), dims.y(), dims.z(), voxels)};
-  if (std::all_of(bytes.begin(), bytes.end(), [](char c) { return c == 0; }))
-    return {grpc::StatusCode::INVALID_ARGUMENT,
-            fmt::format("{}: the mask has no nonzero (seed) voxel", field)};
+    return Status::InvalidArgument(
+        fmt::format("{}: the mask has {} bytes but dims {}x{}x{} need exactly {} (one byte per voxel)", field,
+                    bytes.size(), dims.x(), dims.y(), dims.z(), voxels));
+  const Coord d{int32_t(dims.x()), int32_t(dims.y()), int32_t(dims.z())};
+  auto footprint = std::make_shared<VolumeFootprint>();
+  if (Status s = analyzeVolume(d, reinterpret_cast<const uint8_t*>(bytes.data()), interrupter, footprint.get());
+      !s.ok())
+    return s;
+  if (footprint->seed_voxels == 0)
+    return Status::InvalidArgument(fmt::format("{}: the mask has no nonzero (seed) voxel", field));
   auto asset = std::make_shared<Asset>();
   asset->kind = Asset::Kind::kVolume;
   asset->id = volumeAssetId(dims, bytes);
   asset->name = name;
-  asset->dims = {int32_t(dims.x()), int32_t(dims.y()), int32_t(dims.z())};
+  asset->dims = d;
   asset->mask = std::make_shared<const std::vector<uint8_t>>(bytes.begin(), bytes.end());
+  asset->footprint = std::move(footprint);
   *out = std::move(asset);
-  return grpc::Status::OK;
+  return Status::Ok();
 }
 
 }  // namespace distband

@@ -1,16 +1,18 @@
-// Asset parsing: turns uploaded (or inline) bytes into validated, immutable Assets.
-// Contract: every failure is a grpc::Status (INVALID_ARGUMENT, or RESOURCE_EXHAUSTED for size limits) whose
-// message starts with `field` (the request field the bytes came from) and states the rule that was broken;
-// untrusted bytes never crash the server. Meshes are parsed by core's loadMesh (assimp) through a private
-// temporary file, so every format core accepts is accepted here. Thread-safe.
+// Asset parsing: turns uploaded (or inline) bytes into validated, immutable Assets, in memory.
+// Contract: every failure is a Status — kInvalidArgument (the bytes break a rule of their format), kResourceExhausted
+// (a server limit: --max-triangles, --max-vertices, --max-voxels) or the interrupter's status — whose message starts
+// with `field` (the request field the bytes came from) and states the rule, never quoting more than a short escaped
+// excerpt of the bytes and never naming a server path. Parsing never touches the file system. Long work polls
+// `interrupter`. Thread-safe.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <string_view>
 
-#include <grpcpp/support/status.h>
-
+#include "core/interrupter.h"
+#include "core/status.h"
 #include "distband/v1/distband.pb.h"
 #include "server/asset_cache.h"
 
@@ -19,15 +21,26 @@ namespace distband {
 /// "obj", "off", "ply", "stl", or "" for UNSPECIFIED / unknown values.
 std::string_view meshFormatExtension(v1::MeshFormat format);
 
-/// "" when 1 <= each extent <= kMaxGridDim, otherwise "<field>.x must be in [1, 16384] (got 0)" etc.
-std::string checkDims(const v1::Dims& dims, std::string_view field);
+/// OK when 1 <= each extent <= kMaxGridDim, otherwise "<field>.x must be in [1, 16384] (got 0)" etc.
+Status checkDims(const v1::Dims& dims, std::string_view field);
 
-grpc::Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::string& name,
-                            std::string_view field, std::shared_ptr<const Asset>* out);
+struct MeshLimits {
+  uint64_t max_vertices = uint64_t(1) << 24;
+  uint64_t max_triangles = uint64_t(1) << 24;
+};
 
-/// `max_voxels` bounds dims.x*dims.y*dims.z (RESOURCE_EXHAUSTED beyond it).
-grpc::Status parseVolumeAsset(const v1::Dims& dims, std::string bytes, const std::string& name,
-                              std::string_view field, uint64_t max_voxels, std::shared_ptr<const Asset>* out);
+/// Upper bound on the bytes parseMeshAsset allocates for `input_bytes` of mesh data (the upload is admitted with it).
+uint64_t meshParsePeakBytes(uint64_t input_bytes);
+
+Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::string& name, std::string_view field,
+                      const MeshLimits& limits, const Interrupter* interrupter, std::shared_ptr<const Asset>* out);
+
+/// `max_voxels` bounds dims.x*dims.y*dims.z (kResourceExhausted beyond it). `bytes` is taken over.
+Status parseVolumeAsset(const v1::Dims& dims, std::string bytes, const std::string& name, std::string_view field,
+                        uint64_t max_voxels, const Interrupter* interrupter, std::shared_ptr<const Asset>* out);
+
+/// Peak bytes parseVolumeAsset allocates for a mask of `voxels` bytes (the mask copy and the brick footprint).
+uint64_t volumeParsePeakBytes(uint64_t voxels);
 
 /// The cache id parseMeshAsset / parseVolumeAsset would give these bytes (so uploads can hit the cache first).
 std::string meshAssetId(std::string_view bytes, v1::MeshFormat format);

@@ -1,6 +1,12 @@
 #include "server/distance_field_service.h"
 
+#include <algorithm>
 #include <chrono>
+#include <condition_variable>
+#include <exception>
+#include <mutex>
+#include <new>
+#include <thread>
 
 #include <fmt/format.h>
 #include <grpcpp/grpcpp.h>
@@ -8,6 +14,7 @@
 
 #include "core/engine.h"
 #include "server/asset_parsing.h"
+#include "server/grpc_status.h"
 #include "server/query_job.h"
 #include "server/request_validation.h"
 
@@ -18,22 +25,18 @@ using Clock = std::chrono::steady_clock;
 
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-const char* codeName(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::OK: return "OK";
-    case grpc::StatusCode::CANCELLED: return "CANCELLED";
-    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
-    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
-    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
-    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
-    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
-    case grpc::StatusCode::INTERNAL: return "INTERNAL";
-    default: return "ERROR";
-  }
-}
+std::string statusText(const Status& s) { return s.ok() ? "OK" : fmt::format("{} \"{}\"", Status::codeName(s.code()), s.message()); }
 
-std::string statusText(const grpc::Status& s) {
-  return s.ok() ? "OK" : fmt::format("{} \"{}\"", codeName(s.error_code()), s.error_message());
+/// Client-chosen text in a log line: at most 64 bytes, non-printables escaped (no forged log lines).
+std::string logSafe(std::string_view s) {
+  std::string out;
+  for (size_t i = 0; i < s.size() && i < 64; ++i) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    if (c >= 0x20 && c < 0x7f && c != '\\' && c != '\'') out += char(c);
+    else out += fmt::format("\\x{:02x}", c);
+  }
+  if (s.size() > 64) out += "...";
+  return out;
 }
 
 // Arena: `threads - 1` shared workers, plus one reserved slot per concurrent query for the query's own compute
@@ -44,74 +47,226 @@ std::unique_ptr<tbb::task_arena> makeArena(const ServerOptions& o) {
   return std::make_unique<tbb::task_arena>(q + o.resolvedComputeThreads() - 1, unsigned(q));
 }
 
+/// A compute slot held for the lifetime of the work it admitted.
+struct SlotHold {
+  QuerySlots* slots = nullptr;
+  ~SlotHold() {
+    if (slots) slots->release();
+  }
+};
+
 }  // namespace
 
-DistanceFieldService::DistanceFieldService(const ServerOptions& options, ServerHooks hooks)
+MemoryPlan MemoryPlan::of(const ServerOptions& o) {
+  MemoryPlan p;
+  p.total = o.resolvedMemoryBudget();
+  p.baseline = uint64_t(64) << 20;
+  p.cache = o.resolvedCacheBytes();
+  p.grpc = std::min<uint64_t>(uint64_t(256) << 20, p.total / 16);
+  const uint64_t fixed = p.baseline + p.cache + p.grpc;
+  p.requests = p.total > fixed ? p.total - fixed : 0;
+  return p;
+}
+
+DistanceFieldService::DistanceFieldService(const ServerOptions& options, ServerHooks hooks,
+                                           std::unique_ptr<TokenAuth> auth)
     : options_(options),
       hooks_(std::move(hooks)),
+      auth_(std::move(auth)),
+      plan_(MemoryPlan::of(options)),
       arena_(makeArena(options)),
-      cache_(options.cache_bytes),
-      slots_(options.max_concurrent_queries) {}
+      cache_(plan_.cache),
+      budget_(plan_.requests),
+      slots_(options.max_concurrent_queries),
+      calls_(options.max_streams, std::chrono::milliseconds(int64_t(options.idle_timeout_seconds * 1000))) {}
 
 DistanceFieldService::~DistanceFieldService() = default;
 
+Status DistanceFieldService::admitCall(grpc::ServerContext* context, const char* method,
+                                       std::unique_ptr<ActiveCalls::Call>* call) {
+  if (shutting_down_.load()) return Status::Unavailable("the server is shutting down and accepts no new calls");
+  if (auth_)
+    if (Status s = auth_->check(*context); !s.ok()) return s;
+  return calls_.enter(context, method, call);
+}
+
+Status DistanceFieldService::admitWork(grpc::ServerContext* context, ActiveCalls::Call& call, uint64_t bytes,
+                                       const std::string& what, MemoryBudget::Reservation* reservation,
+                                       bool* have_slot) {
+  *have_slot = false;
+  const auto t0 = Clock::now();
+  auto abandon = [&] { return context->IsCancelled() || call.interrupter().interrupted() || shutting_down_.load(); };
+  const auto wait = std::chrono::milliseconds(options_.queue_wait_ms);
+  if (Status s = budget_.reserve(bytes, what, wait, abandon, reservation); !s.ok()) {
+    if (s.code() == Status::Code::kCancelled && call.interrupter().interrupted()) return call.interrupter().status();
+    return s;
+  }
+  const auto left = std::max(std::chrono::milliseconds(0),
+                             wait - std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - t0));
+  if (!slots_.acquire(left, abandon)) {
+    reservation->release();
+    if (call.interrupter().interrupted()) return call.interrupter().status();
+    if (context->IsCancelled()) return Status::Cancelled("the client cancelled while the call waited for a compute slot");
+    if (shutting_down_.load()) return Status::Unavailable("the server is shutting down");
+    return Status::ResourceExhausted(
+        fmt::format("{}: all {} compute slots (--max-queries, concurrent computations) stayed busy for {} ms; retry later", what,
+                    options_.max_concurrent_queries, options_.queue_wait_ms));
+  }
+  *have_slot = true;
+  return Status::Ok();
+}
+
+Status DistanceFieldService::runCompute(grpc::ServerContext* context, ActiveCalls::Call& call,
+                                        const std::function<Status()>& work) {
+  std::mutex mu;
+  std::condition_variable done_cv;
+  bool done = false;
+  Status result;
+  std::thread compute([&] {
+    Status s;
+    try {
+      arena_->execute([&] { s = work(); });
+    } catch (const std::bad_alloc&) {
+      s = Status::ResourceExhausted("the server ran out of memory for this request");
+    } catch (const std::exception& e) {
+      s = Status::Internal(fmt::format("unexpected failure: {}", e.what()));
+    }
+    std::lock_guard lock(mu);
+    result = std::move(s);
+    done = true;
+    done_cv.notify_all();
+  });
+  {
+    std::unique_lock lock(mu);
+    while (!done_cv.wait_for(lock, std::chrono::milliseconds(5), [&] { return done; }))
+      if (context->IsCancelled()) call.interrupter().cancel(Status::Code::kCancelled, "the client cancelled the call");
+  }
+  compute.join();
+  if (!result.ok() && call.interrupter().interrupted()) return call.interrupter().status();
+  return result;
+}
+
 template <typename Chunk>
-grpc::Status DistanceFieldService::readUpload(grpc::ServerContext* context, grpc::ServerReader<Chunk>* reader,
-                                              std::string* data, Chunk* first, const char* what) {
-  if (shutting_down_.load()) return {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"};
+Status DistanceFieldService::readUpload(grpc::ServerContext* context, grpc::ServerReader<Chunk>* reader,
+                                        ActiveCalls::Call& call, const char* what,
+                                        const std::function<Status(const Chunk&, uint64_t*)>& on_header,
+                                        std::string* data, Chunk* first, MemoryBudget::Reservation* reservation) {
   Chunk chunk;
   bool have_first = false;
-  while (reader->Read(&chunk)) {
+  uint64_t expected_bytes = 0;
+  auto read = [&] {
+    call.waitingForClient(true);
+    const bool ok = reader->Read(&chunk);
+    call.waitingForClient(false);
+    return ok;
+  };
+  while (read()) {
+    if (call.interrupter().interrupted()) return call.interrupter().status();
     if (!have_first) {
       if (!chunk.has_header())
-        return {grpc::StatusCode::INVALID_ARGUMENT, fmt::format("{}: the first chunk must carry `header`", what)};
+        return Status::InvalidArgument(fmt::format("{}: the first chunk must carry `header`", what));
       *first = chunk;
       first->clear_data();
       have_first = true;
+      if (first->header().name().size() > 256)
+        return Status::InvalidArgument(fmt::format("{}.header.name must be at most 256 bytes", what));
+      if (Status s = on_header(*first, &expected_bytes); !s.ok()) return s;
+      // The upload's size, when known up front, is admitted (and reserved) before any byte is buffered.
+      if (expected_bytes > 0) {
+        if (Status s = budget_.reserve(expected_bytes, fmt::format("the upload ({} bytes)", expected_bytes),
+                                       std::chrono::milliseconds(options_.queue_wait_ms),
+                                       [&] { return context->IsCancelled() || call.interrupter().interrupted(); },
+                                       reservation);
+            !s.ok())
+          return s;
+        data->reserve(expected_bytes);
+      }
     } else if (chunk.has_header()) {
-      return {grpc::StatusCode::INVALID_ARGUMENT,
-              fmt::format("{}: only the first chunk may carry `header`", what)};
+      return Status::InvalidArgument(fmt::format("{}: only the first chunk may carry `header`", what));
     }
-    if (data->size() + chunk.data().size() > options_.max_upload_bytes)
-      return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-              fmt::format("{}.data: the upload exceeds the server's limit of {} bytes", what,
-                          options_.max_upload_bytes)};
+    const uint64_t size = data->size() + chunk.data().size();
+    if (size > options_.max_upload_bytes)
+      return Status::ResourceExhausted(
+          fmt::format("{}.data: the upload exceeds the server's limit of {} bytes", what, options_.max_upload_bytes));
+    if (expected_bytes > 0 && size > expected_bytes)
+      return Status::InvalidArgument(
+          fmt::format("{}.data: more data arrived ({}+ bytes) than the header declared ({})", what, size, expected_bytes));
+    if (size > data->capacity()) {
+      // Grow by half (bounded by the upload limit); the old and the new buffer coexist while the bytes move.
+      const uint64_t grown = std::min<uint64_t>(options_.max_upload_bytes,
+                                                std::max<uint64_t>(size, data->capacity() + data->capacity() / 2 + 4096));
+      if (!reservation->held()) budget_.tryReserve(0, reservation);
+      if (!reservation->tryGrow(grown + data->capacity() - std::min<uint64_t>(reservation->bytes(), data->capacity())))
+        return Status::ResourceExhausted(fmt::format(
+            "{}.data: the upload has reached {} and needs {} more, but only {} of the server's memory budget is free",
+            what, humanBytes(data->size()), humanBytes(grown - data->capacity()), humanBytes(budget_.available())));
+      data->reserve(grown);
+      reservation->shrinkTo(data->capacity());
+    }
     data->append(chunk.data());
+    chunk.clear_data();
   }
-  if (context->IsCancelled()) return {grpc::StatusCode::CANCELLED, "the client cancelled the upload"};
-  if (!have_first)
-    return {grpc::StatusCode::INVALID_ARGUMENT, fmt::format("{}: the stream carried no chunk", what)};
-  if (first->header().name().size() > 256)
-    return {grpc::StatusCode::INVALID_ARGUMENT, fmt::format("{}.header.name must be at most 256 bytes", what)};
-  return grpc::Status::OK;
+  if (call.interrupter().interrupted()) return call.interrupter().status();
+  if (context->IsCancelled()) return Status::Cancelled("the client cancelled the upload");
+  if (!have_first) return Status::InvalidArgument(fmt::format("{}: the stream carried no chunk", what));
+  return Status::Ok();
+}
+
+Status DistanceFieldService::parseMeshAdmitted(grpc::ServerContext* context, ActiveCalls::Call& call,
+                                               std::string_view bytes, v1::MeshFormat format, const std::string& name,
+                                               std::string_view field, std::shared_ptr<const Asset>* asset) {
+  MemoryBudget::Reservation parse_memory;
+  bool have_slot = false;
+  if (Status s = admitWork(context, call, meshParsePeakBytes(bytes.size()),
+                           fmt::format("parsing the mesh ({} bytes)", bytes.size()), &parse_memory, &have_slot);
+      !s.ok())
+    return s;
+  SlotHold slot{&slots_};
+  const MeshLimits limits{options_.max_vertices, options_.max_triangles};
+  return runCompute(context, call, [&] {
+    return parseMeshAsset(bytes, format, name, field, limits, &call.interrupter(), asset);
+  });
 }
 
 grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
                                               grpc::ServerReader<v1::UploadMeshChunk>* reader,
                                               v1::UploadReply* reply) {
   const auto t0 = Clock::now();
+  std::unique_ptr<ActiveCalls::Call> call;
   std::string data;
   v1::UploadMeshChunk first;
-  grpc::Status status = readUpload(context, reader, &data, &first, "UploadMeshChunk");
+  MemoryBudget::Reservation buffer;
   std::shared_ptr<const Asset> asset;
   bool cached = false;
-  if (status.ok() && first.header().total_bytes() != 0 && first.header().total_bytes() != data.size())
-    status = {grpc::StatusCode::INVALID_ARGUMENT,
-              fmt::format("UploadMeshChunk.header.total_bytes is {} but {} data bytes arrived",
-                          first.header().total_bytes(), data.size())};
+  Status status = admitCall(context, "UploadMesh", &call);
+  const std::function<Status(const v1::UploadMeshChunk&, uint64_t*)> check_header =
+      [&](const v1::UploadMeshChunk& c, uint64_t* expected) {
+        const v1::UploadMeshHeader& h = c.header();
+        if (meshFormatExtension(h.format()).empty())
+          return Status::InvalidArgument(fmt::format(
+              "UploadMeshChunk.header.format must be MESH_FORMAT_OBJ, _OFF, _PLY or _STL (got {})", int(h.format())));
+        if (h.total_bytes() > options_.max_upload_bytes)
+          return Status::ResourceExhausted(
+              fmt::format("UploadMeshChunk.header.total_bytes: {} bytes exceed the server's upload limit of {}",
+                          h.total_bytes(), options_.max_upload_bytes));
+        *expected = h.total_bytes();
+        return Status::Ok();
+      };
+  if (status.ok()) status = readUpload(context, reader, *call, "UploadMeshChunk", check_header, &data, &first, &buffer);
+  const v1::UploadMeshHeader& h = first.header();
+  if (status.ok() && h.total_bytes() != 0 && h.total_bytes() != data.size())
+    status = Status::InvalidArgument(fmt::format("UploadMeshChunk.header.total_bytes is {} but {} data bytes arrived",
+                                                 h.total_bytes(), data.size()));
+  if (status.ok() && data.empty()) status = Status::InvalidArgument("UploadMeshChunk.data: the mesh data is empty");
   if (status.ok()) {
-    if (meshFormatExtension(first.header().format()).empty()) {
-      status = {grpc::StatusCode::INVALID_ARGUMENT,
-                fmt::format("UploadMeshChunk.header.format must be MESH_FORMAT_OBJ, _OFF, _PLY or _STL (got {})",
-                            int(first.header().format()))};
-    } else if ((asset = cache_.find(meshAssetId(data, first.header().format())))) {
+    if ((asset = cache_.find(meshAssetId(data, h.format())))) {
       cached = true;
     } else {
-      status = parseMeshAsset(data, first.header().format(), first.header().name(), "UploadMeshChunk.data", &asset);
+      status = parseMeshAdmitted(context, *call, data, h.format(), h.name(), "UploadMeshChunk.data", &asset);
       if (status.ok() && !cache_.insert(asset))
-        status = {grpc::StatusCode::RESOURCE_EXHAUSTED,
-                  fmt::format("UploadMeshChunk.data: the parsed mesh needs {} bytes, more than the whole asset "
-                              "cache ({} bytes)", asset->memoryBytes(), cache_.capacityBytes())};
+        status = Status::ResourceExhausted(
+            fmt::format("UploadMeshChunk.data: the parsed mesh needs {} bytes, more than the whole asset cache ({} bytes)",
+                        asset->memoryBytes(), cache_.capacityBytes()));
     }
   }
   if (status.ok()) {
@@ -132,32 +287,60 @@ grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
     }
   }
   spdlog::info("UploadMesh peer={} name='{}' bytes={} id={} cached={} mesh=[{}] time={:.3f}s status={}",
-               context->peer(), first.header().name(), data.size(), asset ? asset->id.substr(0, 17) : "-", cached,
+               context->peer(), logSafe(h.name()), data.size(), asset ? asset->id.substr(0, 17) : "-", cached,
                asset ? asset->mesh_report.summary() : "", since(t0), statusText(status));
-  return status;
+  return toGrpcStatus(status);
 }
 
 grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
                                                 grpc::ServerReader<v1::UploadVolumeChunk>* reader,
                                                 v1::UploadReply* reply) {
   const auto t0 = Clock::now();
+  std::unique_ptr<ActiveCalls::Call> call;
   std::string data;
   v1::UploadVolumeChunk first;
-  grpc::Status status = readUpload(context, reader, &data, &first, "UploadVolumeChunk");
+  MemoryBudget::Reservation buffer;
   std::shared_ptr<const Asset> asset;
   bool cached = false;
+  Status status = admitCall(context, "UploadVolume", &call);
+  // A volume's size follows from its dims: they are checked on the first chunk, before anything is buffered.
+  const std::function<Status(const v1::UploadVolumeChunk&, uint64_t*)> check_header =
+      [&](const v1::UploadVolumeChunk& c, uint64_t* expected) {
+        const v1::UploadVolumeHeader& h = c.header();
+        if (!h.has_dims()) return Status::InvalidArgument("UploadVolumeChunk.header.dims must be set");
+        if (Status s = checkDims(h.dims(), "UploadVolumeChunk.header.dims"); !s.ok()) return s;
+        const uint64_t voxels = uint64_t(h.dims().x()) * h.dims().y() * h.dims().z();
+        const uint64_t limit = std::min(options_.max_voxels_per_query, options_.max_upload_bytes);
+        if (voxels > limit)
+          return Status::ResourceExhausted(fmt::format(
+              "UploadVolumeChunk.header.dims: {}x{}x{} = {} voxels exceeds the server's limit of {} (--max-voxels, "
+              "--max-upload-bytes)",
+              h.dims().x(), h.dims().y(), h.dims().z(), voxels, limit));
+        *expected = voxels;
+        return Status::Ok();
+      };
+  if (status.ok())
+    status = readUpload(context, reader, *call, "UploadVolumeChunk", check_header, &data, &first, &buffer);
+  const v1::UploadVolumeHeader& h = first.header();
   if (status.ok()) {
-    if (!first.header().has_dims()) {
-      status = {grpc::StatusCode::INVALID_ARGUMENT, "UploadVolumeChunk.header.dims must be set"};
-    } else if ((asset = cache_.find(volumeAssetId(first.header().dims(), data)))) {
+    if ((asset = cache_.find(volumeAssetId(h.dims(), data)))) {
       cached = true;
     } else {
-      status = parseVolumeAsset(first.header().dims(), std::move(data), first.header().name(),
-                                "UploadVolumeChunk.header", options_.max_voxels_per_query, &asset);
+      MemoryBudget::Reservation parse_memory;
+      bool have_slot = false;
+      status = admitWork(context, *call, volumeParsePeakBytes(data.size()),
+                         fmt::format("analysing the volume ({} voxels)", data.size()), &parse_memory, &have_slot);
+      if (status.ok()) {
+        SlotHold slot{&slots_};
+        status = runCompute(context, *call, [&] {
+          return parseVolumeAsset(h.dims(), std::move(data), h.name(), "UploadVolumeChunk.header",
+                                  options_.max_voxels_per_query, &call->interrupter(), &asset);
+        });
+      }
       if (status.ok() && !cache_.insert(asset))
-        status = {grpc::StatusCode::RESOURCE_EXHAUSTED,
-                  fmt::format("UploadVolumeChunk.data: the volume needs {} bytes, more than the whole asset cache "
-                              "({} bytes)", asset->memoryBytes(), cache_.capacityBytes())};
+        status = Status::ResourceExhausted(
+            fmt::format("UploadVolumeChunk.data: the volume needs {} bytes, more than the whole asset cache ({} bytes)",
+                        asset->memoryBytes(), cache_.capacityBytes()));
     }
   }
   if (status.ok()) {
@@ -168,15 +351,19 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
     reply->mutable_volume_dims()->set_y(uint32_t(asset->dims.y));
     reply->mutable_volume_dims()->set_z(uint32_t(asset->dims.z));
   }
-  spdlog::info("UploadVolume peer={} name='{}' dims={}x{}x{} id={} cached={} time={:.3f}s status={}",
-               context->peer(), first.header().name(), first.header().dims().x(), first.header().dims().y(),
-               first.header().dims().z(), asset ? asset->id.substr(0, 19) : "-", cached, since(t0),
-               statusText(status));
-  return status;
+  spdlog::info("UploadVolume peer={} name='{}' dims={}x{}x{} id={} cached={} time={:.3f}s status={}", context->peer(),
+               logSafe(h.name()), h.dims().x(), h.dims().y(), h.dims().z(), asset ? asset->id.substr(0, 19) : "-",
+               cached, since(t0), statusText(status));
+  return toGrpcStatus(status);
 }
 
 grpc::Status DistanceFieldService::GetInfo(grpc::ServerContext* context, const v1::GetInfoRequest*,
                                            v1::ServerInfo* r) {
+  std::unique_ptr<ActiveCalls::Call> call;
+  if (Status s = admitCall(context, "GetInfo", &call); !s.ok()) {
+    spdlog::info("GetInfo peer={} status={}", context->peer(), statusText(s));
+    return toGrpcStatus(s);
+  }
   r->set_version(DISTBAND_VERSION);
   r->set_compute_threads(uint32_t(options_.resolvedComputeThreads()));
   r->set_max_concurrent_queries(uint32_t(options_.max_concurrent_queries));
@@ -192,6 +379,13 @@ grpc::Status DistanceFieldService::GetInfo(grpc::ServerContext* context, const v
   for (const char* s : {"float32", "float16"}) r->add_encodings(s);
   r->set_active_queries(uint32_t(slots_.active()));
   r->set_mesh_support(true);
+  r->set_memory_budget_bytes(budget_.capacity());
+  r->set_memory_available_bytes(budget_.available());
+  r->set_max_streams(uint32_t(options_.max_streams));
+  r->set_idle_timeout_seconds(options_.idle_timeout_seconds);
+  r->set_max_triangles(options_.max_triangles);
+  r->set_max_vertices(options_.max_vertices);
+  r->set_auth_required(auth_ != nullptr);
   spdlog::info("GetInfo peer={} status=OK", context->peer());
   return grpc::Status::OK;
 }
@@ -201,80 +395,93 @@ grpc::Status DistanceFieldService::Query(grpc::ServerContext* context, const v1:
   QueryRecord record;
   record.received = Clock::now();
   record.id = fmt::format("q{}", next_query_.fetch_add(1));
-  grpc::Status status = runQuery(context, *request, writer, &record);
-  record.code = status.error_code();
-  record.message = status.error_message();
+  std::unique_ptr<ActiveCalls::Call> call;
+  Status status = admitCall(context, "Query", &call);
+  if (status.ok()) {
+    status = runQuery(context, *call, *request, writer, &record);
+  } else {
+    spdlog::info("Query {} peer={} status={}", record.id, context->peer(), statusText(status));
+  }
+  record.code = toGrpcCode(status.code());
+  record.message = status.message();
   record.finished = Clock::now();
   if (hooks_.on_query_end) hooks_.on_query_end(record);
-  return status;
+  return toGrpcStatus(status);
 }
 
-grpc::Status DistanceFieldService::runQuery(grpc::ServerContext* context, const v1::QueryRequest& request,
-                                            grpc::ServerWriter<v1::QueryReply>* writer, QueryRecord* record) {
+Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls::Call& call,
+                                      const v1::QueryRequest& request, grpc::ServerWriter<v1::QueryReply>* writer,
+                                      QueryRecord* record) {
   const auto t0 = record->received;
+  Interrupter& interrupter = call.interrupter();
   ResolvedQuery q;
   // What the log line shows (copied: `q` moves into the job).
   std::string label = "-";
   Grid grid;
   double limit = 0, segment = 0;
-  auto log = [&](const grpc::Status& s, const std::string& extra) {
+  auto log = [&](const Status& s, const std::string& extra) {
     spdlog::info("Query {} peer={} seeds={} grid={}x{}x{} h={:g} limit={:g} segment={:g} {} time={:.3f}s status={}",
                  record->id, context->peer(), label, grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
                  limit, segment, extra, since(t0), statusText(s));
     return s;
   };
-  if (shutting_down_.load())
-    return log({grpc::StatusCode::UNAVAILABLE, "the server is shutting down and accepts no new queries"}, "");
-  if (grpc::Status s = resolveQuery(request, options_, cache_, &q); !s.ok()) return log(s, "");
+
+  // Validation (and, for an inline mesh, its parse under admission) before any other work.
+  std::shared_ptr<const Asset> inline_mesh;
+  if (Status s = checkInlineMesh(request, options_); !s.ok()) return log(s, "");
+  if (request.seeds_case() == v1::QueryRequest::kMesh)
+    if (Status s = parseMeshAdmitted(context, call, request.mesh().data(), request.mesh().format(), "inline mesh",
+                                     "mesh", &inline_mesh);
+        !s.ok())
+      return log(s, "");
+  if (Status s = resolveQuery(request, options_, cache_, std::move(inline_mesh), &q); !s.ok()) return log(s, "");
   label = q.seeds_label;
   grid = q.grid;
   limit = q.engine.limit_world;
   segment = q.engine.segment_length_world;
 
-  const bool got_slot = slots_.acquire(std::chrono::milliseconds(options_.queue_wait_ms),
-                                       [&] { return context->IsCancelled() || shutting_down_.load(); });
+  // Admission: the estimated peak (seeds, engine, one output chunk, the stream buffer) and a compute slot.
+  const uint64_t peak = q.memory.total() + options_.stream_buffer_bytes;
+  MemoryBudget::Reservation memory;
+  bool have_slot = false;
+  const std::string what = fmt::format("the query ({}x{}x{} voxels, at most {} within the limit; {})", grid.dims().x,
+                                       grid.dims().y, grid.dims().z, q.touched_voxels_bound, q.memory.summary());
+  if (Status s = admitWork(context, call, peak, what, &memory, &have_slot); !s.ok()) return log(s, "");
+  SlotHold slot{&slots_};
+  record->reserved_bytes = memory.bytes();
   const double queue_seconds = since(t0);
-  if (!got_slot) {
-    if (context->IsCancelled()) return log({grpc::StatusCode::CANCELLED, "cancelled while queued"}, "");
-    if (shutting_down_.load())
-      return log({grpc::StatusCode::UNAVAILABLE, "the server is shutting down and accepts no new queries"}, "");
-    return log({grpc::StatusCode::RESOURCE_EXHAUSTED,
-                fmt::format("max concurrent queries: all {} compute slots stayed busy for {} ms; retry later",
-                            options_.max_concurrent_queries, options_.queue_wait_ms)},
-               "");
-  }
-  struct SlotGuard {
-    QuerySlots& slots;
-    ~SlotGuard() { slots.release(); }
-  } slot_guard{slots_};
 
+  auto write = [&](const v1::QueryReply& m) {
+    call.waitingForClient(true);
+    const bool ok = writer->Write(m);
+    call.waitingForClient(false);
+    return ok;
+  };
   {
     v1::QueryReply header;
     fillQueryHeader(q, record->id, header.mutable_header());
-    if (!writer->Write(header)) return log({grpc::StatusCode::CANCELLED, "the client went away"}, "");
+    if (!write(header))
+      return log(interrupter.interrupted() ? interrupter.status() : Status::Cancelled("the client went away"), "");
   }
   const int encoding = q.encoding;
-  QueryJob job(std::move(q), arena_.get(), options_.stream_buffer_bytes);
+  QueryJob job(std::move(q), arena_.get(), options_.stream_buffer_bytes, &interrupter);
   job.start();
   record->engine_ran = true;
   uint64_t messages = 1;
-  bool client_gone = false;
   QueryJob::Message msg;
   for (;;) {
     const auto r = job.queue().pop(&msg, std::chrono::milliseconds(5));
     if (r == BoundedQueue<QueryJob::Message>::PopResult::kClosed) break;
     if (r == BoundedQueue<QueryJob::Message>::PopResult::kItem) {
-      if (!writer->Write(*msg)) {
-        client_gone = true;
-      } else {
-        ++messages;
-      }
+      if (write(*msg)) ++messages;
+      else interrupter.cancel(Status::Code::kCancelled, "the client went away");
       msg.reset();
     }
-    if (!client_gone && context->IsCancelled()) client_gone = true;
-    if (client_gone) {
+    if (!interrupter.interrupted() && context->IsCancelled())
+      interrupter.cancel(Status::Code::kCancelled, "the client cancelled the query");
+    if (interrupter.interrupted()) {
       record->cancel_seen = Clock::now();
-      job.cancel();
+      job.stop();
       break;
     }
   }
@@ -287,21 +494,17 @@ grpc::Status DistanceFieldService::runQuery(grpc::ServerContext* context, const 
   record->messages = messages;
   record->bytes = job.valueBytes();
   record->segments = int(res.segments.size());
-  const std::string stats =
-      fmt::format("segments={} voxels={} bricks={} messages={} MB={:.1f} seeds={:.3f}s compute={:.3f}s enc={}",
-                  res.segments.size(), res.voxels, job.bricksSent(), messages, job.valueBytes() / 1e6,
-                  job.seedSeconds(), res.seconds, encoding == v1::BRICK_ENCODING_FLOAT16 ? "f16" : "f32");
-  if (client_gone) {
+  const std::string stats = fmt::format(
+      "segments={} voxels={} bricks={} messages={} MB={:.1f} seeds={:.3f}s compute={:.3f}s enc={} reserved={}",
+      res.segments.size(), res.voxels, job.bricksSent(), messages, job.valueBytes() / 1e6, job.seedSeconds(),
+      res.seconds, encoding == v1::BRICK_ENCODING_FLOAT16 ? "f16" : "f32", humanBytes(memory.bytes()));
+  if (interrupter.interrupted()) {
+    if (record->cancel_seen == Clock::time_point{}) record->cancel_seen = Clock::now();
     const double stop_ms =
         std::chrono::duration<double, std::milli>(record->engine_stopped - record->cancel_seen).count();
-    return log({grpc::StatusCode::CANCELLED, "the client cancelled or went away"},
-               fmt::format("{} engine_stop_after_cancel={:.1f}ms", stats, stop_ms));
+    return log(interrupter.status(), fmt::format("{} engine_stop_after_cancel={:.1f}ms", stats, stop_ms));
   }
-  if (!job.error().empty())
-    return log({job.outOfMemory() ? grpc::StatusCode::RESOURCE_EXHAUSTED : grpc::StatusCode::INVALID_ARGUMENT,
-                job.error()},
-               stats);
-  if (res.interrupted) return log({grpc::StatusCode::CANCELLED, "the query was interrupted"}, stats);
+  if (!job.status().ok()) return log(job.status(), stats);
 
   v1::QueryReply reply;
   v1::QuerySummary* s = reply.mutable_summary();
@@ -326,8 +529,9 @@ grpc::Status DistanceFieldService::runQuery(grpc::ServerContext* context, const 
     if (i < job.segmentSentSeconds().size()) t->set_sent_seconds(job.segmentSentSeconds()[i]);
   }
   s->set_total_seconds(since(t0));
-  if (!writer->Write(reply)) return log({grpc::StatusCode::CANCELLED, "the client went away"}, stats);
-  return log(grpc::Status::OK, stats);
+  if (!write(reply))
+    return log(interrupter.interrupted() ? interrupter.status() : Status::Cancelled("the client went away"), stats);
+  return log(Status::Ok(), stats);
 }
 
 }  // namespace distband

@@ -1,33 +1,57 @@
-// DistanceFieldService: the distband.v1.DistanceField gRPC service (synchronous API).
-// Contract:
-//   * gRPC handler threads only validate, wait for the bounded queue and write; compute happens on each query's
-//     own compute thread inside the shared TBB arena (server/query_job.h).
-//   * At most options.max_concurrent_queries queries compute at once; a query beyond that waits up to
-//     options.queue_wait_ms, then gets RESOURCE_EXHAUSTED.
-//   * Client cancel, disconnect, deadline and server shutdown stop the query's engine within one engine step
-//     plus the handler's 5 ms poll, and its queued messages are dropped at once.
-//   * beginShutdown() makes new queries and uploads fail with UNAVAILABLE; running ones continue.
-//   * Every request ends with one spdlog line (method, peer, outcome, sizes, timings).
+// DistanceFieldService: the distband.v1.DistanceField gRPC service (synchronous API), hardened for untrusted
+// clients.
+// Contract, for every call:
+//   1. Admission of the call itself (server/active_calls.h): at most --max-streams in flight, else
+//      RESOURCE_EXHAUSTED at once; a token check when --auth-token-file is set (UNAUTHENTICATED); UNAVAILABLE once
+//      shutdown has begun. The call gets one Interrupter (client deadline, cancel, idle watchdog, shutdown) that every
+//      phase polls.
+//   2. Validation before any work (server/request_validation.h): every rule of the .proto, cheap.
+//   3. Admission of the work: an estimate of its peak bytes is reserved in the memory budget
+//      (server/memory_budget.h) and a compute slot is taken (at most --max-queries computing, uploads' parsing
+//      included); both wait at most --queue-wait-ms, then RESOURCE_EXHAUSTED saying what was asked and what is free.
+//   4. Compute on a dedicated thread inside the shared TBB arena (never on a gRPC thread's stack budget), while the
+//      handler thread polls its context every 5 ms so a client cancel trips the Interrupter at once.
+//   * Uploads: the declared total_bytes is checked on the first chunk; the buffer grows only as bytes arrive and
+//     only as far as the memory budget allows; parsing happens in memory (no file is ever opened because of what
+//     a mesh says) under the same admission as queries.
+//   * Errors are core Status values mapped to gRPC codes in one place (server/grpc_status.h).
+//   * beginShutdown(): new calls get UNAVAILABLE; stopAll() cancels the running ones (end of the grace period).
+//   * Every call ends with one spdlog line (method, peer, outcome, sizes, timings).
 // Thread-safe.
 #pragma once
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 
 #include <tbb/task_arena.h>
 
 #include "distband/v1/distband.grpc.pb.h"
+#include "server/active_calls.h"
 #include "server/asset_cache.h"
+#include "server/memory_budget.h"
 #include "server/query_slots.h"
 #include "server/server_options.h"
+#include "server/token_auth.h"
 
 namespace distband {
 
+/// How the server's --memory-budget is divided (see ServerOptions::memory_budget_bytes).
+struct MemoryPlan {
+  uint64_t total = 0;     ///< --memory-budget
+  uint64_t baseline = 0;  ///< the process itself: code, libraries, thread stacks, TBB
+  uint64_t cache = 0;     ///< the asset cache's capacity
+  uint64_t grpc = 0;      ///< gRPC's resource quota (its transport buffers)
+  uint64_t requests = 0;  ///< what uploads and queries are admitted against
+  static MemoryPlan of(const ServerOptions& options);
+};
+
 class DistanceFieldService final : public v1::DistanceField::Service {
  public:
-  DistanceFieldService(const ServerOptions& options, ServerHooks hooks);
+  /// `auth` may be null (no token required).
+  DistanceFieldService(const ServerOptions& options, ServerHooks hooks, std::unique_ptr<TokenAuth> auth);
   ~DistanceFieldService() override;
 
   grpc::Status UploadMesh(grpc::ServerContext* context, grpc::ServerReader<v1::UploadMeshChunk>* reader,
@@ -40,21 +64,47 @@ class DistanceFieldService final : public v1::DistanceField::Service {
                        v1::ServerInfo* reply) override;
 
   void beginShutdown() { shutting_down_.store(true); }
+  /// Cancels every running call (their Interrupters trip with `reason`).
+  void stopAll(const Status& reason) { calls_.stopAll(reason); }
+  int activeCalls() const { return calls_.active(); }
   int activeQueries() const { return slots_.active(); }
   AssetCache& cache() { return cache_; }
+  MemoryBudget& budget() { return budget_; }
+  const ActiveCalls& calls() const { return calls_; }
+  const MemoryPlan& memoryPlan() const { return plan_; }
 
  private:
+  /// Step 1 of the contract: admits the call (or says why not).
+  Status admitCall(grpc::ServerContext* context, const char* method, std::unique_ptr<ActiveCalls::Call>* call);
+  /// Step 3: reserves `bytes` and a compute slot, waiting at most --queue-wait-ms in total.
+  Status admitWork(grpc::ServerContext* context, ActiveCalls::Call& call, uint64_t bytes, const std::string& what,
+                   MemoryBudget::Reservation* reservation, bool* have_slot);
+  /// Step 4: runs `work` on a compute thread in the arena; the handler thread watches the context meanwhile.
+  Status runCompute(grpc::ServerContext* context, ActiveCalls::Call& call, const std::function<Status()>& work);
+
+  /// Reads an upload stream into `data`. `on_header` checks the first chunk's header and gives the data size it
+  /// promises (0: unknown); a known size is reserved at once, an unknown one grows with the data, both within the
+  /// memory budget and --max-upload-bytes.
   template <typename Chunk>
-  grpc::Status readUpload(grpc::ServerContext* context, grpc::ServerReader<Chunk>* reader, std::string* data,
-                          Chunk* first, const char* what);
-  grpc::Status runQuery(grpc::ServerContext* context, const v1::QueryRequest& request,
-                        grpc::ServerWriter<v1::QueryReply>* writer, QueryRecord* record);
+  Status readUpload(grpc::ServerContext* context, grpc::ServerReader<Chunk>* reader, ActiveCalls::Call& call,
+                    const char* what, const std::function<Status(const Chunk&, uint64_t*)>& on_header,
+                    std::string* data, Chunk* first, MemoryBudget::Reservation* reservation);
+  /// Parses a mesh under admission (budget + slot) and the call's Interrupter.
+  Status parseMeshAdmitted(grpc::ServerContext* context, ActiveCalls::Call& call, std::string_view bytes,
+                           v1::MeshFormat format, const std::string& name, std::string_view field,
+                           std::shared_ptr<const Asset>* asset);
+  Status runQuery(grpc::ServerContext* context, ActiveCalls::Call& call, const v1::QueryRequest& request,
+                  grpc::ServerWriter<v1::QueryReply>* writer, QueryRecord* record);
 
   const ServerOptions options_;
   const ServerHooks hooks_;
+  const std::unique_ptr<TokenAuth> auth_;
+  const MemoryPlan plan_;
   std::unique_ptr<tbb::task_arena> arena_;
   AssetCache cache_;
+  MemoryBudget budget_;
   QuerySlots slots_;
+  ActiveCalls calls_;
   std::atomic<bool> shutting_down_{false};
   std::atomic<uint64_t> next_query_{1};
 };

@@ -1,11 +1,15 @@
 // distband-server: serves distband.v1.DistanceField over gRPC. See server/flags.cc for the flags and
-// docs/protocol.md for the protocol. SIGTERM/SIGINT: stop accepting queries, let running streams finish within
-// --grace-seconds, exit 0.
+// docs/protocol.md for the protocol.
+// Signals: the first SIGTERM/SIGINT stops accepting new calls, lets running ones finish within --grace-seconds,
+// cancels what is left and exits 0. A second signal during that drain exits at once (status 1).
 #include <pthread.h>
 #include <signal.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <thread>
 
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
@@ -31,7 +35,7 @@ int main(int argc, char** argv) {
   }
   spdlog::set_level(spdlog::level::from_str(log_level));
 
-  // Handle SIGINT/SIGTERM on one dedicated thread: block them everywhere before any other thread starts.
+  // Handle SIGINT/SIGTERM on this thread: block them everywhere before any other thread starts.
   sigset_t signals;
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
@@ -41,11 +45,27 @@ int main(int argc, char** argv) {
   distband::DistbandServer server(options);
   if (grpc::Status s = server.start(); !s.ok()) {
     std::fprintf(stderr, "distband-server: %s\n", s.error_message().c_str());
-    return 1;
+    return s.error_code() == grpc::StatusCode::INVALID_ARGUMENT ? 2 : 1;
   }
   int sig = 0;
   sigwait(&signals, &sig);
-  spdlog::info("received {}", sig == SIGTERM ? "SIGTERM" : "SIGINT");
-  server.shutdown(std::chrono::milliseconds(int64_t(options.grace_seconds * 1000)));
+  spdlog::info("received {}: draining for up to {:g} s (send it again to exit at once)",
+               sig == SIGTERM ? "SIGTERM" : "SIGINT", options.grace_seconds);
+  std::atomic<bool> done{false};
+  std::thread drain([&] {
+    server.shutdown(std::chrono::milliseconds(int64_t(options.grace_seconds * 1000)));
+    done.store(true);
+  });
+  // Wait for the drain, or for a second signal.
+  const timespec tick{0, 50 * 1000 * 1000};
+  while (!done.load()) {
+    siginfo_t info;
+    if (sigtimedwait(&signals, &info, &tick) > 0) {
+      spdlog::warn("received a second signal: exiting without draining");
+      spdlog::shutdown();
+      std::_Exit(1);
+    }
+  }
+  drain.join();
   return 0;
 }

@@ -3,6 +3,7 @@
 #include <exception>
 #include <new>
 
+#include <fmt/format.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -11,17 +12,23 @@
 
 namespace distband {
 namespace {
+
 double secondsBetween(QueryJob::Clock::time_point a, QueryJob::Clock::time_point b) {
   return std::chrono::duration<double>(b - a).count();
 }
+
+// Whether a chunk handed over by the engine is the last of its segment.
+bool completesSegment(const SegmentBricks&) { return true; }
+
 }  // namespace
 
-QueryJob::QueryJob(ResolvedQuery query, tbb::task_arena* arena, uint64_t buffer_bytes)
-    : query_(std::move(query)), arena_(arena), queue_(buffer_bytes) {}
+QueryJob::QueryJob(ResolvedQuery query, tbb::task_arena* arena, uint64_t buffer_bytes, Interrupter* interrupter)
+    : query_(std::move(query)), arena_(arena), queue_(buffer_bytes), interrupter_(interrupter) {}
 
 QueryJob::~QueryJob() {
   if (thread_.joinable()) {
-    cancel();
+    interrupter_->cancel(Status::Code::kCancelled, "the query was abandoned");
+    stop();
     thread_.join();
   }
 }
@@ -31,10 +38,7 @@ void QueryJob::start() {
   thread_ = std::thread([this] { run(); });
 }
 
-void QueryJob::cancel() {
-  cancelled_.store(true);
-  queue_.abort();
-}
+void QueryJob::stop() { queue_.abort(); }
 
 void QueryJob::join() {
   if (thread_.joinable()) thread_.join();
@@ -45,38 +49,39 @@ void QueryJob::run() {
     arena_->execute([&] {
       const auto t0 = Clock::now();
       Seeds seeds;
-      std::string e = buildSeeds(query_, &seeds);
+      const std::string e = buildSeeds(query_, &seeds);
       seed_seconds_ = secondsBetween(t0, Clock::now());
-      if (!e.empty()) {
-        error_ = "seeds: " + e;
+      if (interrupter_->interrupted()) {
+        result_.interrupted = true;
         return;
       }
-      if (cancelled_.load()) {
-        result_.interrupted = true;
+      if (!e.empty()) {
+        // Every rule a request can break was checked before compute: what fails here is the server's fault.
+        status_ = Status::Internal("seeds: " + e);
         return;
       }
       EngineOptions options = query_.engine;
       options.threads = 0;  // the shared arena we are executing in
-      options.interrupted = [this] { return cancelled_.load(std::memory_order_relaxed); };
-      last_callback_end_ = Clock::now();
+      options.interrupted = [this] { return interrupter_->interrupted(); };
+      segment_started_ = Clock::now();
       result_ = computeDistanceField(query_.grid, std::move(seeds), options,
-                                     [this](SegmentBricks&& s) { emitSegment(std::move(s)); });
+                                     [this](SegmentBricks&& s) { emitChunk(std::move(s)); });
     });
   } catch (const std::bad_alloc&) {
-    out_of_memory_ = true;
-    error_ = "the server ran out of memory for this query; lower the resolution or set a limit";
+    status_ = Status::ResourceExhausted(
+        "the server ran out of memory for this query (its estimate was too low); lower the resolution or set a limit");
   } catch (const std::exception& ex) {
-    error_ = ex.what();
+    status_ = Status::Internal(fmt::format("the engine failed: {}", ex.what()));
   }
+  if (interrupter_->interrupted()) result_.interrupted = true;
   engine_stopped_ = Clock::now();
   queue_.close();
 }
 
-void QueryJob::emitSegment(SegmentBricks&& segment) {
-  const double compute_seconds = secondsBetween(last_callback_end_, Clock::now());
+void QueryJob::emitChunk(SegmentBricks&& chunk) {
+  segment_compute_seconds_ += secondsBetween(segment_started_, Clock::now());
   const v1::BrickEncoding enc = query_.encoding;
-  uint64_t voxels = 0, bricks = 0;
-  const size_t n = segment.bricks.size();
+  const size_t n = chunk.bricks.size();
   // Batches: always at least one brick per message; a batch stops before exceeding the byte bound.
   struct Batch {
     size_t begin, end, bytes;
@@ -85,56 +90,60 @@ void QueryJob::emitSegment(SegmentBricks&& segment) {
   for (size_t i = 0; i < n;) {
     Batch batch{i, i, 32};
     do {
-      const Brick& b = segment.bricks[i];
+      const Brick& b = chunk.bricks[i];
       const int count = b.mask.count();
       const size_t need = encodedBrickBytes(count, enc);
       if (batch.end > batch.begin && batch.bytes + need > query_.batch_bytes) break;
       batch.bytes += need;
-      voxels += uint64_t(count);
+      segment_voxels_ += uint64_t(count);
       value_bytes_ += need - 24;
-      ++bricks;
+      ++segment_bricks_so_far_;
       batch.end = ++i;
     } while (i < n);
     batches.push_back(batch);
   }
   // Encoded in parallel on the query's arena (the engine waits for this callback anyway), a wave at a time so a
-  // large segment is never held encoded all at once; sent in order.
+  // chunk is never held encoded all at once; sent in order.
   const size_t wave = 4 * size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
   std::vector<std::unique_ptr<v1::QueryReply>> messages;
-  for (size_t w0 = 0; w0 < batches.size() && !cancelled_.load(std::memory_order_relaxed); w0 += wave) {
+  for (size_t w0 = 0; w0 < batches.size() && !interrupter_->interrupted(); w0 += wave) {
     const size_t w1 = std::min(batches.size(), w0 + wave);
     messages.clear();
     messages.resize(w1 - w0);
     tbb::parallel_for(size_t(w0), w1, [&](size_t k) {
       auto msg = std::make_unique<v1::QueryReply>();
       v1::BrickBatch* batch = msg->mutable_bricks();
-      batch->set_segment(uint32_t(segment.index));
-      batch->set_lower(segment.lower_world);
-      batch->set_upper(segment.upper_world);
+      batch->set_segment(uint32_t(chunk.index));
+      batch->set_lower(chunk.lower_world);
+      batch->set_upper(chunk.upper_world);
       batch->mutable_bricks()->Reserve(int(batches[k].end - batches[k].begin));
-      for (size_t i = batches[k].begin; i < batches[k].end; ++i) encodeBrick(segment.bricks[i], enc, batch->add_bricks());
+      for (size_t i = batches[k].begin; i < batches[k].end; ++i) encodeBrick(chunk.bricks[i], enc, batch->add_bricks());
       messages[k - w0] = std::move(msg);
     });
     for (size_t k = w0; k < w1; ++k)
-      if (!queue_.push(std::move(messages[k - w0]), batches[k].bytes)) return;  // cancelled
+      if (!queue_.push(std::move(messages[k - w0]), batches[k].bytes)) return;  // stopped
   }
-  segment.bricks.clear();
-  segment.bricks.shrink_to_fit();
-  if (cancelled_.load()) return;
-  auto done = std::make_unique<v1::QueryReply>();
-  v1::SegmentDone* d = done->mutable_segment_done();
-  d->set_segment(uint32_t(segment.index));
-  d->set_lower(segment.lower_world);
-  d->set_upper(segment.upper_world);
-  d->set_voxels(voxels);
-  d->set_bricks(bricks);
-  d->set_compute_seconds(compute_seconds);
-  d->set_last(segment.last);
-  bricks_sent_ += bricks;
-  segment_bricks_.push_back(bricks);
-  segment_sent_seconds_.push_back(secondsBetween(started_, Clock::now()));
-  queue_.push(std::move(done), 64);
-  last_callback_end_ = Clock::now();
+  chunk.bricks.clear();
+  chunk.bricks.shrink_to_fit();
+  if (interrupter_->interrupted()) return;
+  if (completesSegment(chunk)) {
+    auto done = std::make_unique<v1::QueryReply>();
+    v1::SegmentDone* d = done->mutable_segment_done();
+    d->set_segment(uint32_t(chunk.index));
+    d->set_lower(chunk.lower_world);
+    d->set_upper(chunk.upper_world);
+    d->set_voxels(segment_voxels_);
+    d->set_bricks(segment_bricks_so_far_);
+    d->set_compute_seconds(segment_compute_seconds_);
+    d->set_last(chunk.last);
+    bricks_sent_ += segment_bricks_so_far_;
+    segment_bricks_.push_back(segment_bricks_so_far_);
+    segment_sent_seconds_.push_back(secondsBetween(started_, Clock::now()));
+    segment_voxels_ = segment_bricks_so_far_ = 0;
+    segment_compute_seconds_ = 0;
+    queue_.push(std::move(done), 64);
+  }
+  segment_started_ = Clock::now();
 }
 
 }  // namespace distband

@@ -2,11 +2,13 @@
 // Contract:
 //   * start() launches a dedicated compute thread (never a gRPC thread) that enters the server's shared TBB
 //     arena, builds the seeds and runs computeDistanceField with threads = 0 (the arena's workers help).
-//   * Each finished segment is encoded into BrickBatch messages (<= batch_bytes each) followed by a SegmentDone,
-//     pushed into a byte-bounded queue: when the writer (the gRPC handler) falls behind, push blocks and the
-//     engine pauses — memory stays bounded by the queue capacity plus the engine's own state.
-//   * cancel() (from any thread) makes the engine stop at its next step and drops queued messages at once.
-//   * When compute ends (normally, by error or by cancel) the queue is closed; the consumer drains it, then
+//   * The engine hands finished bricks over in chunks of at most kQueryChunkBricks; each chunk is encoded into
+//     BrickBatch messages (<= batch_bytes each) pushed into a byte-bounded queue, and a segment's last chunk is
+//     followed by its SegmentDone. When the writer (the gRPC handler) falls behind, push blocks and the engine
+//     pauses: what waits for a slow client is bounded by the queue capacity plus one chunk, never a whole segment.
+//   * Every phase polls the call's Interrupter; stop() (any thread) also drops queued messages at once and makes a
+//     blocked push return, so the engine sees the interrupter at its next poll.
+//   * When compute ends (normally, by error or by interruption) the queue is closed; the consumer drains it, then
 //     join()s and reads the outcome.
 #pragma once
 
@@ -20,6 +22,8 @@
 #include <tbb/task_arena.h>
 
 #include "core/engine.h"
+#include "core/interrupter.h"
+#include "core/status.h"
 #include "distband/v1/distband.pb.h"
 #include "server/bounded_queue.h"
 #include "server/request_validation.h"
@@ -31,20 +35,19 @@ class QueryJob {
   using Clock = std::chrono::steady_clock;
   using Message = std::unique_ptr<v1::QueryReply>;
 
-  QueryJob(ResolvedQuery query, tbb::task_arena* arena, uint64_t buffer_bytes);
-  ~QueryJob();  ///< cancels and joins if still running
+  QueryJob(ResolvedQuery query, tbb::task_arena* arena, uint64_t buffer_bytes, Interrupter* interrupter);
+  ~QueryJob();  ///< stops and joins if still running
   QueryJob(const QueryJob&) = delete;
   QueryJob& operator=(const QueryJob&) = delete;
 
   void start();
-  void cancel();
+  /// Drops queued messages and refuses new ones; the caller trips the interrupter (with its reason) first.
+  void stop();
   void join();
   BoundedQueue<Message>& queue() { return queue_; }
 
   // Valid after join().
-  const std::string& error() const { return error_; }  ///< seed or engine failure ("" when none)
-  bool outOfMemory() const { return out_of_memory_; }  ///< the failure was an allocation failure
-  bool cancelled() const { return cancelled_.load(); }
+  const Status& status() const { return status_; }  ///< seed or engine failure (OK when none)
   const EngineResult& result() const { return result_; }
   double seedSeconds() const { return seed_seconds_; }
   Clock::time_point engineStopped() const { return engine_stopped_; }
@@ -56,19 +59,20 @@ class QueryJob {
 
  private:
   void run();
-  void emitSegment(SegmentBricks&& segment);
+  void emitChunk(SegmentBricks&& chunk);
 
   ResolvedQuery query_;
   tbb::task_arena* arena_;
   BoundedQueue<Message> queue_;
+  Interrupter* interrupter_;
   std::thread thread_;
-  std::atomic<bool> cancelled_{false};
 
-  std::string error_;
-  bool out_of_memory_ = false;
+  Status status_;
   EngineResult result_;
   double seed_seconds_ = 0;
-  Clock::time_point started_{}, engine_stopped_{}, last_callback_end_{};
+  Clock::time_point started_{}, engine_stopped_{}, segment_started_{};
+  double segment_compute_seconds_ = 0;
+  uint64_t segment_voxels_ = 0, segment_bricks_so_far_ = 0;  ///< of the segment being emitted
   uint64_t bricks_sent_ = 0, value_bytes_ = 0;
   std::vector<double> segment_sent_seconds_;
   std::vector<uint64_t> segment_bricks_;

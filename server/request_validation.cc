@@ -5,13 +5,14 @@
 
 #include <fmt/format.h>
 
+#include "core/band_extent.h"
 #include "core/mesh/mesh_grid.h"
 #include "server/asset_parsing.h"
 
 namespace distband {
 namespace {
 
-grpc::Status invalid(std::string message) { return {grpc::StatusCode::INVALID_ARGUMENT, std::move(message)}; }
+Status invalid(std::string message) { return Status::InvalidArgument(std::move(message)); }
 
 bool finite(const v1::Vec3& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
 Vec3d toVec(const v1::Vec3& v) { return {v.x(), v.y(), v.z()}; }
@@ -20,8 +21,8 @@ constexpr uint32_t kMaxPadding = 4096;
 constexpr int kMaxPoints = 1 << 20;
 constexpr double kMaxSegments = 100000;
 
-grpc::Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, AssetCache& cache,
-                          ResolvedQuery* q) {
+Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, AssetCache& cache,
+                    std::shared_ptr<const Asset> inline_mesh, ResolvedQuery* q) {
   switch (r.seeds_case()) {
     case v1::QueryRequest::kAssetId: {
       if (r.asset_id().empty() || r.asset_id().size() > 128)
@@ -29,19 +30,21 @@ grpc::Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& option
                                    r.asset_id().size()));
       q->asset = cache.find(r.asset_id());
       if (!q->asset)
-        return {grpc::StatusCode::NOT_FOUND,
-                fmt::format("asset_id: no asset '{}' in the cache (never uploaded, or evicted: upload it again)",
-                            r.asset_id())};
+        return Status::NotFound(
+            fmt::format("asset_id: no asset '{}' in the cache (never uploaded, or evicted: upload it again)",
+                        r.asset_id()));
       q->seed_kind = q->asset->kind == Asset::Kind::kMesh ? ResolvedQuery::SeedKind::kMesh
                                                            : ResolvedQuery::SeedKind::kVolume;
       q->seeds_label = q->asset->id.substr(0, std::min<size_t>(q->asset->id.size(), 17)) +
                        (q->asset->name.empty() ? "" : "(" + q->asset->name + ")");
-      return grpc::Status::OK;
+      return Status::Ok();
     }
     case v1::QueryRequest::kMesh: {
       q->seed_kind = ResolvedQuery::SeedKind::kMesh;
       q->seeds_label = fmt::format("inline-mesh({} bytes)", r.mesh().data().size());
-      return parseMeshAsset(r.mesh().data(), r.mesh().format(), "inline mesh", "mesh", &q->asset);
+      if (!inline_mesh) return Status::Internal("the inline mesh was not parsed before the query was resolved");
+      q->asset = std::move(inline_mesh);
+      return Status::Ok();
     }
     case v1::QueryRequest::kPoints: {
       const auto& pts = r.points().points();
@@ -57,21 +60,21 @@ grpc::Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& option
       }
       q->seed_kind = ResolvedQuery::SeedKind::kPoints;
       q->seeds_label = fmt::format("points({})", pts.size());
-      return grpc::Status::OK;
+      return Status::Ok();
     }
     case v1::QueryRequest::kVolume: {
       q->seed_kind = ResolvedQuery::SeedKind::kVolume;
       q->seeds_label = fmt::format("inline-volume({}x{}x{})", r.volume().dims().x(), r.volume().dims().y(),
                                    r.volume().dims().z());
       return parseVolumeAsset(r.volume().dims(), r.volume().mask(), "inline volume", "volume",
-                              options.max_voxels_per_query, &q->asset);
+                              options.max_voxels_per_query, nullptr, &q->asset);
     }
     case v1::QueryRequest::SEEDS_NOT_SET: break;
   }
   return invalid("seeds: exactly one of asset_id, mesh, points, volume must be set");
 }
 
-grpc::Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* grid) {
+Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* grid) {
   if (g.voxel_size() != 0 && !(std::isfinite(g.voxel_size()) && g.voxel_size() > 0))
     return invalid(fmt::format("grid.voxel_size must be finite and > 0 when set (got {})", g.voxel_size()));
   if (g.resolution() != 0 && (g.resolution() < 2 || g.resolution() > uint32_t(kMaxGridDim)))
@@ -88,7 +91,7 @@ grpc::Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* gr
     if (g.has_padding()) return invalid("grid.padding cannot be combined with grid.dims");
     Coord dims;
     if (g.has_dims()) {
-      if (std::string e = checkDims(g.dims(), "grid.dims"); !e.empty()) return invalid(e);
+      if (Status s = checkDims(g.dims(), "grid.dims"); !s.ok()) return s;
       dims = {int32_t(g.dims().x()), int32_t(g.dims().y()), int32_t(g.dims().z())};
       if (volume && !(dims == q.asset->dims))
         return invalid(fmt::format("grid.dims ({}x{}x{}) must equal the volume's dims ({}x{}x{}) or be omitted",
@@ -102,7 +105,7 @@ grpc::Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* gr
       h = 1;
     }
     *grid = Grid(g.has_origin() ? toVec(g.origin()) : Vec3d{}, h, dims);
-    return grid->validate().empty() ? grpc::Status::OK : invalid("grid: " + grid->validate());
+    return grid->validate().empty() ? Status::Ok() : invalid("grid: " + grid->validate());
   }
 
   if (g.has_origin()) return invalid("grid.origin is only used with grid.dims (the box or the seeds give it)");
@@ -129,15 +132,100 @@ grpc::Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* gr
     }
   }
   if (std::string e = gridForMesh(*bounds, mo, grid); !e.empty()) return invalid("grid: " + e);
-  return grpc::Status::OK;
+  return Status::Ok();
+}
+
+// The engine's site ids have 27 bits: reject what would overflow them before any seed is built.
+constexpr uint64_t kMaxEngineSites = (uint64_t(1) << 27) - 2;
+
+double meshAreaVoxels(const TriangleMesh& mesh, double voxel_size) {
+  double area2 = 0;  // twice the area, world units
+  for (const auto& t : mesh.triangles) {
+    const Vec3d &a = mesh.vertices[t[0]], &b = mesh.vertices[t[1]], &c = mesh.vertices[t[2]];
+    area2 += (b - a).cross(c - a).length();
+  }
+  return area2 / 2 / (voxel_size * voxel_size);
+}
+
+Status checkSites(const ResolvedQuery& q) {
+  uint64_t sites = 0;
+  std::string what;
+  switch (q.seed_kind) {
+    case ResolvedQuery::SeedKind::kPoints: return Status::Ok();  // bounded by kMaxPoints
+    case ResolvedQuery::SeedKind::kVolume:
+      sites = q.asset->footprint->boundary_voxels;
+      what = "volume: the mask has {} boundary voxels (each one a site)";
+      break;
+    case ResolvedQuery::SeedKind::kMesh:
+      if (q.engine.mode == PropagationMode::kPaper) {
+        sites = meshBandVoxelEstimate(meshAreaVoxels(*q.asset->mesh, q.grid.voxelSize()), 0, UINT64_MAX);
+        what = "mesh: paper mode makes a site of every initial band voxel, about {} here";
+      } else {
+        sites = q.asset->mesh->triangles.size();
+        what = "mesh: {} triangles";
+      }
+      break;
+  }
+  if (sites <= kMaxEngineSites) return Status::Ok();
+  return Status::ResourceExhausted(fmt::format(fmt::runtime(what), sites) +
+                                   fmt::format(", more than the engine's {} sites; use a coarser grid{}", kMaxEngineSites,
+                                               q.seed_kind == ResolvedQuery::SeedKind::kMesh ? " or exact mode" : ""));
+}
+
+// The touched-voxel bound of the seeds within the limit, and the peak bytes the query is admitted with.
+void estimateMemory(ResolvedQuery* q) {
+  const double limit_voxels = q->engine.limit_world / q->grid.voxelSize();
+  BandExtent extent(q->grid, limit_voxels);
+  FieldMemoryInput in;
+  in.mode = q->engine.mode;
+  in.grid_voxels = uint64_t(q->grid.voxelCount());
+  in.chunk_bricks = kQueryChunkBricks;
+  switch (q->seed_kind) {
+    case ResolvedQuery::SeedKind::kPoints:
+      in.seed_kind = FieldMemoryInput::SeedKind::kPoints;
+      in.points = q->points.size();
+      for (const Vec3d& p : q->points) extent.addPoint(q->grid.indexOf(p));
+      break;
+    case ResolvedQuery::SeedKind::kVolume:
+      in.seed_kind = FieldMemoryInput::SeedKind::kVolume;
+      in.signed_volume = q->sign == v1::SIGN_MODE_MASK_INSIDE;
+      in.volume_seed_voxels = q->asset->footprint->seed_voxels;
+      in.volume_boundary_voxels = q->asset->footprint->boundary_voxels;
+      addVolume(*q->asset->footprint, in.signed_volume, &extent);
+      break;
+    case ResolvedQuery::SeedKind::kMesh: {
+      in.seed_kind = FieldMemoryInput::SeedKind::kMesh;
+      const TriangleMesh& mesh = *q->asset->mesh;
+      in.mesh_vertices = mesh.vertices.size();
+      in.mesh_triangles = mesh.triangles.size();
+      in.mesh_area_voxels = meshAreaVoxels(mesh, q->grid.voxelSize());
+      switch (q->sign) {
+        case v1::SIGN_MODE_WINDING: in.mesh_sign = SignMethod::kWinding; break;
+        case v1::SIGN_MODE_PARITY: in.mesh_sign = SignMethod::kParity; break;
+        case v1::SIGN_MODE_UNSIGNED: in.mesh_sign = SignMethod::kUnsigned; break;
+        default: in.mesh_sign = SignMethod::kPseudonormal; break;
+      }
+      if (!extent.wholeGrid())
+        for (const auto& t : mesh.triangles) {
+          const Vec3d a = q->grid.indexOf(mesh.vertices[t[0]]), b = q->grid.indexOf(mesh.vertices[t[1]]),
+                      c = q->grid.indexOf(mesh.vertices[t[2]]);
+          extent.addBox({std::min({a.x, b.x, c.x}), std::min({a.y, b.y, c.y}), std::min({a.z, b.z, c.z})},
+                        {std::max({a.x, b.x, c.x}), std::max({a.y, b.y, c.y}), std::max({a.z, b.z, c.z})});
+        }
+      break;
+    }
+  }
+  q->touched_voxels_bound = extent.voxelBound();
+  in.touched_voxels = q->touched_voxels_bound;
+  q->memory = estimateFieldMemory(in);
 }
 
 }  // namespace
 
-grpc::Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, AssetCache& cache,
-                          ResolvedQuery* out) {
+Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, AssetCache& cache,
+                    std::shared_ptr<const Asset> inline_mesh, ResolvedQuery* out) {
   ResolvedQuery q;
-  if (grpc::Status s = resolveSeeds(r, options, cache, &q); !s.ok()) return s;
+  if (Status s = resolveSeeds(r, options, cache, std::move(inline_mesh), &q); !s.ok()) return s;
 
   // Enumerations (proto3 enums are open: unknown numbers must be rejected, not cast).
   switch (r.stencil()) {
@@ -206,12 +294,12 @@ grpc::Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& option
                       : std::clamp<uint32_t>(r.max_batch_bytes(), 64u << 10, options.max_message_bytes);
 
   if (!r.has_grid()) return invalid("grid must be set (voxel_size or resolution, or dims)");
-  if (grpc::Status s = resolveGrid(r.grid(), q, &q.grid); !s.ok()) return s;
+  if (Status s = resolveGrid(r.grid(), q, &q.grid); !s.ok()) return s;
   const uint64_t voxels = uint64_t(q.grid.voxelCount());
   if (voxels > options.max_voxels_per_query)
-    return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-            fmt::format("grid: {}x{}x{} = {} voxels exceeds the server's voxel budget of {} per query",
-                        q.grid.dims().x, q.grid.dims().y, q.grid.dims().z, voxels, options.max_voxels_per_query)};
+    return Status::ResourceExhausted(
+        fmt::format("grid: {}x{}x{} = {} voxels exceeds the server's voxel budget of {} per query", q.grid.dims().x,
+                    q.grid.dims().y, q.grid.dims().z, voxels, options.max_voxels_per_query));
   if (std::string e = validateOptions(q.grid, q.engine); !e.empty()) return invalid(e);
   // Without a limit the engine's own segment-count rule does not apply: bound it by the grid's diagonal, the
   // largest distance a voxel can have, so a tiny segment length cannot request millions of empty segments.
@@ -224,8 +312,22 @@ grpc::Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& option
                                  "segments; use a longer segment_length",
                                  q.engine.segment_length_world, span, kMaxSegments));
   }
+  if (Status s = checkSites(q); !s.ok()) return s;
+  estimateMemory(&q);
   *out = std::move(q);
-  return grpc::Status::OK;
+  return Status::Ok();
+}
+
+Status checkInlineMesh(const v1::QueryRequest& r, const ServerOptions& options) {
+  if (r.seeds_case() != v1::QueryRequest::kMesh) return Status::Ok();
+  if (meshFormatExtension(r.mesh().format()).empty())
+    return invalid(fmt::format("mesh.format must be one of MESH_FORMAT_OBJ, _OFF, _PLY, _STL (got {})",
+                               int(r.mesh().format())));
+  if (r.mesh().data().empty()) return invalid("mesh.data: the mesh data is empty");
+  if (r.mesh().data().size() > options.max_upload_bytes)
+    return Status::ResourceExhausted(fmt::format("mesh.data: {} bytes exceed the server's upload limit of {}",
+                                                 r.mesh().data().size(), options.max_upload_bytes));
+  return Status::Ok();
 }
 
 void fillQueryHeader(const ResolvedQuery& q, const std::string& query_id, v1::QueryHeader* h) {

@@ -1,10 +1,10 @@
 // Request validation: a distband.v1.QueryRequest checked field by field and resolved into what the engine needs.
-// Contract: resolveQuery() never trusts the request. It answers INVALID_ARGUMENT (a field breaks a rule),
-// NOT_FOUND (asset_id not in the cache) or RESOURCE_EXHAUSTED (voxel budget, message limits), with a message
-// that names the field and the rule, e.g. "grid.resolution must be in [2, 16384] (got 1)". On OK, `out` holds
-// the grid, the engine options (without an interrupter) and the seeds' source; building the Seeds themselves is
-// compute work and happens later on the compute thread (server/seed_builder.h).
-// Inline meshes are parsed here (on the calling thread); they are bounded by the message size limit.
+// Contract: resolveQuery() never trusts the request and checks every rule the .proto states before any compute:
+// kInvalidArgument (a field breaks a rule), kNotFound (asset_id not in the cache) or kResourceExhausted (voxel
+// budget, engine site limit), with a message that names the field and the rule, e.g. "grid.resolution must be in
+// [2, 16384] (got 1)". It is cheap: O(seeds + grid/512) for the touched-voxel bound, no allocation of the field.
+// On OK, `out` holds the grid, the engine options (without an interrupter), the seeds' source and the memory
+// estimate the query is admitted with; building the Seeds is compute work done later (server/seed_builder.h).
 // Thread-safe (the cache is).
 #pragma once
 
@@ -12,9 +12,9 @@
 #include <string>
 #include <vector>
 
-#include <grpcpp/support/status.h>
-
 #include "core/engine.h"
+#include "core/field_memory.h"
+#include "core/status.h"
 #include "core/grid.h"
 #include "distband/v1/distband.pb.h"
 #include "server/asset_cache.h"
@@ -36,12 +36,22 @@ struct ResolvedQuery {
   v1::PropagationMode mode = v1::PROPAGATION_MODE_EXACT; ///< never UNSPECIFIED
   v1::BrickEncoding encoding = v1::BRICK_ENCODING_FLOAT32;  ///< never UNSPECIFIED
   uint32_t batch_bytes = 1u << 20;
+  uint64_t touched_voxels_bound = 0;    ///< BandExtent::voxelBound() of the seeds and limit
+  FieldMemoryEstimate memory;           ///< peak bytes of seeds + engine + one output chunk
 
   bool signedField() const { return sign != v1::SIGN_MODE_UNSIGNED; }
 };
 
-grpc::Status resolveQuery(const v1::QueryRequest& request, const ServerOptions& options, AssetCache& cache,
-                          ResolvedQuery* out);
+/// `inline_mesh`: the parsed QueryRequest.mesh when the request carries one (parsing is compute work that the
+/// caller admits and runs first, see checkInlineMesh), else null.
+Status resolveQuery(const v1::QueryRequest& request, const ServerOptions& options, AssetCache& cache,
+                    std::shared_ptr<const Asset> inline_mesh, ResolvedQuery* out);
+
+/// The cheap checks of QueryRequest.mesh (format, size) before it is parsed; OK for requests without one.
+Status checkInlineMesh(const v1::QueryRequest& request, const ServerOptions& options);
+
+/// Output bricks the engine hands to a query's encoder at once (EngineOptions::max_chunk_bricks).
+inline constexpr size_t kQueryChunkBricks = 1024;
 
 /// The header message describing a resolved query (first message of the stream).
 void fillQueryHeader(const ResolvedQuery& query, const std::string& query_id, v1::QueryHeader* header);

@@ -1,11 +1,15 @@
 // DistbandServer: a running distband gRPC server — the DistanceField service, the standard grpc.health.v1
-// health service and server reflection — on one listening address.
+// health service and (only with --reflection) server reflection — on exactly one listening address.
 // Contract:
-//   * start() binds and starts serving (returns a failed status, e.g. when the address is taken). port() is the
-//     bound port (useful with "127.0.0.1:0"). Health reports SERVING for "" and "distband.v1.DistanceField".
-//   * shutdown(grace) is the SIGTERM path: health goes NOT_SERVING, new queries/uploads get UNAVAILABLE (the
-//     port stays open while queries drain, so probes see NOT_SERVING), running streams may continue for
-//     `grace`, then they are cancelled (their engines stop); returns when every handler has returned. Idempotent; the destructor calls it with zero grace.
+//   * start() reads the TLS and token files (errors name the flag and the file), binds and starts serving; it
+//     returns a failed status when the address is taken or a file is unusable. port() is the bound port (useful
+//     with "127.0.0.1:0"). Health reports SERVING for "" and "distband.v1.DistanceField".
+//   * gRPC's threads are capped (its resource quota: --grpc-threads) and so are its buffers (a share of
+//     --memory-budget); HTTP/2 streams per connection are capped at --max-streams.
+//   * shutdown(grace) is the SIGTERM path: health goes NOT_SERVING, new calls get UNAVAILABLE (the port stays open
+//     while calls drain, so probes see NOT_SERVING), running calls may continue for `grace`, then every call is
+//     cancelled (its Interrupter trips, its engine stops); returns when every handler has returned. Idempotent; the
+//     destructor calls it with zero grace. Returns true when every call finished within the grace period.
 // start/shutdown from one controlling thread; the service itself is thread-safe.
 #pragma once
 
@@ -28,13 +32,15 @@ class DistbandServer {
 
   grpc::Status start();
   int port() const { return port_; }
-  void shutdown(std::chrono::milliseconds grace);
+  bool shutdown(std::chrono::milliseconds grace);
   /// Blocks until shutdown() has completed (from another thread).
   void wait();
   DistanceFieldService& service() { return *service_; }
+  const ServerOptions& options() const { return options_; }
 
  private:
   ServerOptions options_;
+  ServerHooks hooks_;
   std::unique_ptr<DistanceFieldService> service_;
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;

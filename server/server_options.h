@@ -1,6 +1,8 @@
 // ServerOptions: everything an operator can tune on distband-server (each one is a command-line flag, see
 // server/flags.h), plus ServerHooks, the in-process observation points tests and benches use.
-// Contract: plain values; validate() returns "" or a message naming the option and the rule.
+// Contract: plain values; validate() returns "" or a message naming the flag and the rule. The resolved*()
+// accessors turn "0 = automatic" settings into the values in force (the memory budget reads the process's memory
+// limit: the cgroup's memory.max when set, else the machine's RAM).
 #pragma once
 
 #include <chrono>
@@ -13,23 +15,45 @@
 namespace distband {
 
 struct ServerOptions {
-  std::string listen_address = "0.0.0.0:50051";  ///< host:port; port 0 picks a free port
+  /// host:port; port 0 picks a free port. Loopback by default: exposing the service is an explicit decision
+  /// (the container and the manifests pass 0.0.0.0:50051).
+  std::string listen_address = "127.0.0.1:50051";
   /// Threads computing one query (the shared arena's workers + the query's own compute thread). 0 = all cores.
   int compute_threads = 0;
-  int max_concurrent_queries = 4;      ///< queries computing at once
-  int queue_wait_ms = 2000;            ///< how long a query beyond the limit waits before RESOURCE_EXHAUSTED
+  int max_concurrent_queries = 4;      ///< queries (and upload parses) computing at once
+  int queue_wait_ms = 2000;            ///< how long work beyond the slots or the memory budget waits
   uint64_t max_voxels_per_query = uint64_t(1024) * 1024 * 1024;  ///< bound on dims.x*dims.y*dims.z
   uint64_t max_upload_bytes = uint64_t(256) << 20;                ///< bound on one upload's data
-  uint64_t cache_bytes = uint64_t(1) << 30;                       ///< asset cache capacity
+  uint64_t max_triangles = uint64_t(1) << 24;  ///< bound on the triangles a mesh may declare or hold
+  uint64_t max_vertices = uint64_t(1) << 24;   ///< bound on the vertices a mesh may declare or hold
+  /// Asset cache capacity; 0 = a quarter of the memory budget (at most 1 GiB). Part of the memory budget.
+  uint64_t cache_bytes = 0;
+  /// Bytes the whole process may use for requests; 0 = half of the memory the process may use. Every upload and
+  /// query is admitted by an estimate of its peak bytes against it.
+  uint64_t memory_budget_bytes = 0;
   uint32_t max_message_bytes = 16u << 20;  ///< largest message received (inline seeds, upload chunks) or sent
   uint32_t batch_bytes = 1u << 20;         ///< default upper bound of one BrickBatch message
-  /// Encoded messages one query may hold between its compute thread and its writer (the bounded queue).
+  /// Encoded messages one query may hold between its compute thread and its writer; the engine pauses beyond it.
   uint64_t stream_buffer_bytes = uint64_t(8) << 20;
-  double grace_seconds = 10;  ///< on shutdown, how long running streams may continue before being cancelled
+  double grace_seconds = 10;  ///< on shutdown, how long running calls may continue before being cancelled
+  /// An upload that receives nothing, or a query whose client consumes nothing, for this long is cancelled.
+  double idle_timeout_seconds = 60;
+  int max_streams = 128;     ///< concurrent RPCs of the DistanceField service; beyond it RESOURCE_EXHAUSTED at once
+  int grpc_threads = 0;      ///< cap on gRPC's threads (its resource quota); 0 = max_streams + 16
+  std::string tls_cert_file, tls_key_file;  ///< PEM; both set = TLS
+  std::string tls_client_ca_file;           ///< PEM; set = clients must present a certificate it signed (mTLS)
+  std::string auth_token_file;  ///< one bearer token a line; set = every DistanceField call needs one
+  bool reflection = false;      ///< serve grpc.reflection.v1alpha (the schema is public, but off unless asked)
 
   std::string validate() const;
   int resolvedComputeThreads() const;  ///< compute_threads, or the core count when 0
+  uint64_t resolvedMemoryBudget() const;
+  uint64_t resolvedCacheBytes() const;
+  int resolvedGrpcThreads() const;
 };
+
+/// The memory this process may use: min(RAM, cgroup v2 memory.max / v1 memory.limit_in_bytes, RLIMIT_AS).
+uint64_t processMemoryLimitBytes();
 
 /// What happened to one query, reported when its handler ends (for tests, benches and the log line).
 struct QueryRecord {
@@ -44,6 +68,7 @@ struct QueryRecord {
   Clock::time_point engine_stopped{};  ///< computeDistanceField returned
   Clock::time_point finished{};        ///< handler about to return
   uint64_t voxels = 0, bricks = 0, messages = 0, bytes = 0;
+  uint64_t reserved_bytes = 0;         ///< the memory-budget reservation it was admitted with
   int segments = 0;
 };
 

@@ -1,0 +1,71 @@
+#include "core/field_memory.h"
+
+#include <algorithm>
+
+#include <fmt/format.h>
+
+namespace distband {
+namespace {
+
+// Measured constants (bench/admission_bench; docs/benchmarks.md "Admission estimates"). Bytes unless noted.
+constexpr double kEngineBytesPerVoxel = 9.0;        // key (8) + 5 bit sets, in whole bricks (exact mode)
+constexpr double kLifespanBytesPerVoxel = 2.0;      // paper mode's expiry steps
+constexpr double kFrontBytesPerVoxel = 3.0;         // front, next front and deferred offers (12 B entries)
+constexpr double kBrickTableBytesPerBrick = 8.0;    // dense brick table over the whole grid
+constexpr double kOutputBytesPerBrick = sizeof(Brick) + 64;
+constexpr double kPointSeedBytes = 24 + 27 * 16;    // the point and its 3^3 block of band voxels
+constexpr double kVolumeSeedBytesPerSeedVoxel = 16;      // unsigned: every seed voxel is a band voxel
+constexpr double kVolumeSeedBytesPerBoundaryVoxel = 40;  // site (24) + band voxel (16)
+constexpr double kSignedVolumeBytesPerGridVoxel = 5;     // region labels (1) + the scan's site ids (4)
+constexpr double kMeshBytesPerTriangle = 400;   // index-space triangles, normals, pseudonormals, BVH / winding tree
+constexpr double kMeshBytesPerBandVoxel = 80;   // scan candidates, band list, paper-mode site points
+constexpr double kMeshBandVoxelsPerArea = 3.5;      // 2 x 1.5 voxels, plus lattice effects
+constexpr double kMeshBandVoxelsPerTriangle = 8;    // the band's rounded ends, counted per triangle
+constexpr double kSafety = 1.15;                // allocator slack on top of the measured sizes
+constexpr uint64_t kFixedBytes = uint64_t(8) << 20;  // per-run constants (thread buffers, arena)
+
+}  // namespace
+
+std::string FieldMemoryEstimate::summary() const {
+  auto mib = [](uint64_t b) { return b / 1048576.0; };
+  return fmt::format("engine {:.1f} MiB + seeds {:.1f} MiB + output {:.1f} MiB", mib(engine_bytes), mib(seed_bytes),
+                     mib(output_bytes));
+}
+
+uint64_t meshBandVoxelEstimate(double area_voxels, uint64_t triangles, uint64_t touched_voxels) {
+  const double band = kMeshBandVoxelsPerArea * area_voxels + kMeshBandVoxelsPerTriangle * double(triangles);
+  return uint64_t(std::min(band, double(touched_voxels)));
+}
+
+FieldMemoryEstimate estimateFieldMemory(const FieldMemoryInput& in) {
+  const double touched = double(std::min(in.touched_voxels, in.grid_voxels));
+  const double touched_bricks = touched / kBrickVoxels;
+  FieldMemoryEstimate e;
+  double engine = touched * (kEngineBytesPerVoxel + kFrontBytesPerVoxel) +
+                  double(in.grid_voxels) / kBrickVoxels * kBrickTableBytesPerBrick;
+  if (in.mode == PropagationMode::kPaper) engine += touched * kLifespanBytesPerVoxel;
+  double seeds = 0;
+  switch (in.seed_kind) {
+    case FieldMemoryInput::SeedKind::kPoints: seeds = double(in.points) * kPointSeedBytes; break;
+    case FieldMemoryInput::SeedKind::kVolume:
+      if (in.signed_volume)
+        seeds = double(in.grid_voxels) * kSignedVolumeBytesPerGridVoxel +
+                double(in.volume_boundary_voxels) * kVolumeSeedBytesPerBoundaryVoxel;
+      else
+        seeds = double(in.volume_seed_voxels) * kVolumeSeedBytesPerSeedVoxel +
+                double(in.volume_boundary_voxels) * kVolumeSeedBytesPerBoundaryVoxel;
+      break;
+    case FieldMemoryInput::SeedKind::kMesh: {
+      const double band = double(meshBandVoxelEstimate(in.mesh_area_voxels, in.mesh_triangles, in.touched_voxels));
+      seeds = double(in.mesh_triangles) * kMeshBytesPerTriangle + band * kMeshBytesPerBandVoxel;
+      break;
+    }
+  }
+  const double chunk_bricks = in.chunk_bricks ? std::min(double(in.chunk_bricks), touched_bricks) : touched_bricks;
+  e.engine_bytes = uint64_t(engine * kSafety) + kFixedBytes;
+  e.seed_bytes = uint64_t(seeds * kSafety);
+  e.output_bytes = uint64_t((chunk_bricks + 1) * kOutputBytesPerBrick * kSafety);
+  return e;
+}
+
+}  // namespace distband
