@@ -65,8 +65,21 @@ RemoteClient::RemoteClient(const std::string& target, RemoteClientOptions option
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(int(options_.max_message_bytes));
   args.SetMaxSendMessageSize(int(options_.max_message_bytes));
-  channel_ = grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+  std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
+  if (options_.tls) {
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = options_.tls_root_ca_pem;
+    ssl.pem_cert_chain = options_.tls_client_cert_pem;
+    ssl.pem_private_key = options_.tls_client_key_pem;
+    credentials = grpc::SslCredentials(ssl);
+    if (!options_.tls_server_name.empty()) args.SetSslTargetNameOverride(options_.tls_server_name);
+  }
+  channel_ = grpc::CreateCustomChannel(target, credentials, args);
   stub_ = v1::DistanceField::NewStub(channel_);
+}
+
+void RemoteClient::authorize(grpc::ClientContext* context) const {
+  if (!options_.bearer_token.empty()) context->AddMetadata("authorization", "Bearer " + options_.bearer_token);
 }
 
 namespace {
@@ -92,6 +105,7 @@ grpc::Status uploadChunks(grpc::ClientWriter<Chunk>* writer, grpc::ClientContext
 grpc::Status RemoteClient::uploadMesh(const std::string& bytes, v1::MeshFormat format, const std::string& name,
                                       v1::UploadReply* reply) {
   grpc::ClientContext ctx;
+  authorize(&ctx);
   auto writer = stub_->UploadMesh(&ctx, reply);
   return uploadChunks(writer.get(), ctx, bytes.data(), bytes.size(), options_.upload_chunk_bytes,
                       [&](v1::UploadMeshHeader* h) {
@@ -118,6 +132,7 @@ grpc::Status RemoteClient::uploadMeshFile(const std::string& path, v1::UploadRep
 grpc::Status RemoteClient::uploadVolume(const Coord& dims, const std::vector<uint8_t>& mask, const std::string& name,
                                         v1::UploadReply* reply) {
   grpc::ClientContext ctx;
+  authorize(&ctx);
   auto writer = stub_->UploadVolume(&ctx, reply);
   return uploadChunks(writer.get(), ctx, reinterpret_cast<const char*>(mask.data()), mask.size(),
                       options_.upload_chunk_bytes, [&](v1::UploadVolumeHeader* h) {
@@ -134,6 +149,7 @@ RemoteQueryResult RemoteClient::query(const v1::QueryRequest& request, const Rem
   const auto t0 = Clock::now();
   auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - t0).count(); };
   grpc::ClientContext ctx;
+  authorize(&ctx);
   if (options.deadline.count() > 0) ctx.set_deadline(std::chrono::system_clock::now() + options.deadline);
   if (options.canceller) options.canceller->attach(&ctx);
   auto reader = stub_->Query(&ctx, request);
@@ -239,6 +255,7 @@ RemoteQueryResult RemoteClient::query(const v1::QueryRequest& request, const Rem
 grpc::Status RemoteClient::info(v1::ServerInfo* info, std::chrono::milliseconds deadline) {
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() + deadline);
+  authorize(&ctx);
   return stub_->GetInfo(&ctx, v1::GetInfoRequest(), info);
 }
 

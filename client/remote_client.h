@@ -31,6 +31,13 @@ namespace distband {
 struct RemoteClientOptions {
   uint32_t max_message_bytes = 64u << 20;  ///< largest message accepted from the server
   size_t upload_chunk_bytes = 1u << 20;    ///< upload chunk size
+  /// TLS: set `tls` to use it; `tls_root_ca_pem` empty = the system's roots. A client certificate and key (PEM)
+  /// answer a server that requires mutual TLS. `tls_server_name` overrides the name checked against the server's
+  /// certificate (default: the target's host).
+  bool tls = false;
+  std::string tls_root_ca_pem, tls_client_cert_pem, tls_client_key_pem, tls_server_name;
+  /// Sent as `authorization: Bearer <token>` on every DistanceField call (not on health checks).
+  std::string bearer_token;
 };
 
 /// Cancels a running query() from another thread (e.g. a SIGINT watcher). Reusable only for one query.
@@ -103,6 +110,9 @@ class RemoteClient {
   const std::shared_ptr<grpc::Channel>& channel() const { return channel_; }
 
  private:
+  /// A context carrying the bearer token, if any.
+  void authorize(grpc::ClientContext* context) const;
+
   RemoteClientOptions options_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::DistanceField::Stub> stub_;

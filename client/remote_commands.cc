@@ -14,6 +14,7 @@
 #include "client/compute_command.h"
 #include "client/progress.h"
 #include "client/remote_client.h"
+#include "client/remote_connection.h"
 #include "core/io/isosurface.h"
 #include "core/io/npy.h"
 #include "core/io/slice_png.h"
@@ -23,7 +24,7 @@ namespace distband {
 namespace {
 
 struct QueryArgs {
-  std::string server = "127.0.0.1:50051";
+  ConnectionArgs connection;
   std::string mesh, points, volume, asset;
   int resolution = 0;
   int padding = -1;  ///< -1: the server's default
@@ -38,9 +39,15 @@ struct QueryArgs {
   std::vector<std::string> isosurface;  ///< D OBJ
 };
 
-struct ServerArg {
-  std::string server = "127.0.0.1:50051";
-};
+/// The client for a subcommand's connection flags, or "" and a message naming the flag.
+std::unique_ptr<RemoteClient> connect(const ConnectionArgs& a, const char* command, const CliContext& ctx) {
+  RemoteClientOptions options;
+  if (std::string e = makeClientOptions(a, &options); !e.empty()) {
+    ctx.err << "distband " << command << ": " << e << "\n";
+    return nullptr;
+  }
+  return std::make_unique<RemoteClient>(a.server, options);
+}
 
 /// Exit code of a failed RPC: the caller's fault -> usage (2), otherwise failure (1).
 int exitCodeOf(const grpc::Status& s) {
@@ -200,7 +207,9 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
                          {"quiet", ProgressMode::kQuiet}, {"terminal", ProgressMode::kTerminal}}, &pmode))
     return usage(fmt::format("--progress '{}': expected auto, plain, terminal or quiet", a.progress));
 
-  RemoteClient client(a.server);
+  std::unique_ptr<RemoteClient> connection = connect(a.connection, "query", ctx);
+  if (!connection) return kExitUsage;
+  RemoteClient& client = *connection;
   v1::QueryRequest request;
   grpc::Status status;
   if (std::string e = buildRequest(a, client, ctx, &request, &status); !e.empty()) return usage(e);
@@ -350,7 +359,7 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
 CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
   auto args = std::make_shared<QueryArgs>();
   CLI::App* cmd = app.add_subcommand("query", "Compute a distance field on a distband server and write it");
-  cmd->add_option("--server", args->server, "Server address HOST:PORT")->capture_default_str();
+  addConnectionFlags(cmd, &args->connection);
   cmd->add_option("--mesh", args->mesh, "Seed mesh (.obj .off .ply .stl), uploaded first");
   cmd->add_option("--points", args->points, "Seed points in world coordinates: \"x,y,z;x,y,z\"");
   cmd->add_option("--volume", args->volume, "Seed mask .npy (uint8/bool, shape (Z, Y, X)), uploaded first");
@@ -384,11 +393,12 @@ CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
 
 CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
   struct Args {
-    std::string server = "127.0.0.1:50051", mesh, volume;
+    ConnectionArgs connection;
+    std::string mesh, volume;
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("upload", "Upload a mesh or seed volume to a distband server's cache");
-  cmd->add_option("--server", args->server, "Server address HOST:PORT")->capture_default_str();
+  addConnectionFlags(cmd, &args->connection);
   cmd->add_option("--mesh", args->mesh, "Mesh file (.obj .off .ply .stl)");
   cmd->add_option("--volume", args->volume, "Seed mask .npy (uint8/bool, shape (Z, Y, X))");
   return {cmd, [args, &ctx] {
@@ -396,7 +406,9 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
               ctx.err << "distband upload: give exactly one of --mesh and --volume\n";
               return kExitUsage;
             }
-            RemoteClient client(args->server);
+            std::unique_ptr<RemoteClient> connection = connect(args->connection, "upload", ctx);
+            if (!connection) return kExitUsage;
+            RemoteClient& client = *connection;
             v1::UploadReply up;
             grpc::Status s;
             if (!args->mesh.empty()) {
@@ -425,11 +437,13 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
 }
 
 CliCommand registerInfo(CLI::App& app, const CliContext& ctx) {
-  auto args = std::make_shared<ServerArg>();
+  auto args = std::make_shared<ConnectionArgs>();
   CLI::App* cmd = app.add_subcommand("info", "Show a distband server's version, limits and options");
-  cmd->add_option("--server", args->server, "Server address HOST:PORT")->capture_default_str();
+  addConnectionFlags(cmd, args.get());
   return {cmd, [args, &ctx] {
-            RemoteClient client(args->server);
+            std::unique_ptr<RemoteClient> connection = connect(*args, "info", ctx);
+            if (!connection) return kExitUsage;
+            RemoteClient& client = *connection;
             v1::ServerInfo i;
             if (grpc::Status s = client.info(&i); !s.ok()) {
               ctx.err << "distband info: " << describe(s) << "\n";
@@ -455,14 +469,17 @@ CliCommand registerInfo(CLI::App& app, const CliContext& ctx) {
 
 CliCommand registerHealth(CLI::App& app, const CliContext& ctx) {
   struct Args {
-    std::string server = "127.0.0.1:50051", service;
+    ConnectionArgs connection;
+    std::string service;
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("health", "grpc.health.v1 check of a distband server (exit 0 iff SERVING)");
-  cmd->add_option("--server", args->server, "Server address HOST:PORT")->capture_default_str();
+  addConnectionFlags(cmd, &args->connection);
   cmd->add_option("--service", args->service, "Service name (\"\": the whole server)");
   return {cmd, [args, &ctx] {
-            RemoteClient client(args->server);
+            std::unique_ptr<RemoteClient> connection = connect(args->connection, "health", ctx);
+            if (!connection) return kExitUsage;
+            RemoteClient& client = *connection;
             bool serving = false;
             std::string name;
             if (grpc::Status s = client.health(args->service, &serving, &name); !s.ok()) {

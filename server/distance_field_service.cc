@@ -232,6 +232,7 @@ grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
                                               grpc::ServerReader<v1::UploadMeshChunk>* reader,
                                               v1::UploadReply* reply) {
   const auto t0 = Clock::now();
+  const std::string peer = context->peer();
   std::unique_ptr<ActiveCalls::Call> call;
   std::string data;
   v1::UploadMeshChunk first;
@@ -287,7 +288,7 @@ grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
     }
   }
   spdlog::info("UploadMesh peer={} name='{}' bytes={} id={} cached={} mesh=[{}] time={:.3f}s status={}",
-               context->peer(), logSafe(h.name()), data.size(), asset ? asset->id.substr(0, 17) : "-", cached,
+               peer, logSafe(h.name()), data.size(), asset ? asset->id.substr(0, 17) : "-", cached,
                asset ? asset->mesh_report.summary() : "", since(t0), statusText(status));
   return toGrpcStatus(status);
 }
@@ -296,6 +297,7 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
                                                 grpc::ServerReader<v1::UploadVolumeChunk>* reader,
                                                 v1::UploadReply* reply) {
   const auto t0 = Clock::now();
+  const std::string peer = context->peer();
   std::unique_ptr<ActiveCalls::Call> call;
   std::string data;
   v1::UploadVolumeChunk first;
@@ -351,7 +353,7 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
     reply->mutable_volume_dims()->set_y(uint32_t(asset->dims.y));
     reply->mutable_volume_dims()->set_z(uint32_t(asset->dims.z));
   }
-  spdlog::info("UploadVolume peer={} name='{}' dims={}x{}x{} id={} cached={} time={:.3f}s status={}", context->peer(),
+  spdlog::info("UploadVolume peer={} name='{}' dims={}x{}x{} id={} cached={} time={:.3f}s status={}", peer,
                logSafe(h.name()), h.dims().x(), h.dims().y(), h.dims().z(), asset ? asset->id.substr(0, 19) : "-",
                cached, since(t0), statusText(status));
   return toGrpcStatus(status);
@@ -413,6 +415,7 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
                                       const v1::QueryRequest& request, grpc::ServerWriter<v1::QueryReply>* writer,
                                       QueryRecord* record) {
   const auto t0 = record->received;
+  const std::string peer = context->peer();
   Interrupter& interrupter = call.interrupter();
   ResolvedQuery q;
   // What the log line shows (copied: `q` moves into the job).
@@ -421,7 +424,7 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
   double limit = 0, segment = 0;
   auto log = [&](const Status& s, const std::string& extra) {
     spdlog::info("Query {} peer={} seeds={} grid={}x{}x{} h={:g} limit={:g} segment={:g} {} time={:.3f}s status={}",
-                 record->id, context->peer(), label, grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
+                 record->id, peer, label, grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
                  limit, segment, extra, since(t0), statusText(s));
     return s;
   };
