@@ -66,7 +66,9 @@ void ActiveCalls::stopAll(const Status& reason) {
   std::lock_guard lock(mu_);
   for (Call* c : calls_) {
     c->interrupter_.cancel(reason.code(), reason.message());
-    if (c->context_) c->context_->TryCancel();
+    // A handler computing sees its Interrupter and answers with `reason`; one blocked on its client can only be
+    // woken by cancelling the call.
+    if (c->context_ && c->waiting_since_ns_.load(std::memory_order_relaxed) != 0) c->context_->TryCancel();
   }
 }
 

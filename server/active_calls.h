@@ -7,7 +7,8 @@
 //     writing a reply. When one such wait lasts longer than the idle timeout, the watchdog cancels the call: its
 //     Interrupter trips (kCancelled, "idle for N s") and the gRPC context is cancelled, which ends the blocked
 //     Read/Write. Compute time never counts as idle.
-//   * stopAll() trips every call's Interrupter and cancels its context (the end of the shutdown grace period).
+//   * stopAll() trips every call's Interrupter (the end of the shutdown grace period); calls blocked on their client
+//     are also cancelled, since nothing else wakes them.
 //   * The watchdog is one thread that wakes every 50 ms; it only calls thread-safe ServerContext::TryCancel.
 // Thread-safe.
 #pragma once

@@ -1,0 +1,233 @@
+// Tests of the distband-server binary as its own process on a loopback port: figures only the server's own
+// process shows (threads from /proc/PID/status) and its signal handling (SIGTERM drains, a second signal exits).
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <regex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "client/remote_client.h"
+#include "tests/integration/service_fixture.h"
+
+namespace distband {
+namespace {
+
+/// distband-server started with `args` on 127.0.0.1:0; its log goes to a pipe read by a thread.
+class ServerProcess {
+ public:
+  explicit ServerProcess(std::vector<std::string> args) {
+    int out[2];
+    if (pipe(out) != 0) return;
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], 1);
+      dup2(out[1], 2);
+      close(out[0]);
+      std::vector<std::string> all = {DISTBAND_SERVER_BINARY, "--listen", "127.0.0.1:0"};
+      all.insert(all.end(), args.begin(), args.end());
+      std::vector<char*> argv;
+      for (auto& a : all) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(argv[0], argv.data());
+      _exit(127);
+    }
+    close(out[1]);
+    log_fd_ = out[0];
+    reader_ = std::thread([this] {
+      char buf[4096];
+      for (ssize_t n; (n = read(log_fd_, buf, sizeof buf)) > 0;) {
+        std::lock_guard lock(mu_);
+        log_.append(buf, size_t(n));
+      }
+    });
+    const auto deadline = Clock::now() + std::chrono::seconds(10);
+    const std::regex port_re(R"(\(port (\d+),)");
+    while (Clock::now() < deadline && port_ == 0) {
+      std::smatch m;
+      const std::string text = log();
+      if (std::regex_search(text, m, port_re)) port_ = std::stoi(m[1]);
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  }
+  ~ServerProcess() {
+    if (pid_ > 0 && !exited_) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+    if (reader_.joinable()) reader_.join();
+    if (log_fd_ >= 0) close(log_fd_);
+  }
+  int port() const { return port_; }
+  pid_t pid() const { return pid_; }
+  std::string target() const { return "127.0.0.1:" + std::to_string(port_); }
+  std::string log() {
+    std::lock_guard lock(mu_);
+    return log_;
+  }
+  /// Threads of the server process now (from /proc/PID/status).
+  int threads() const {
+    std::ifstream in("/proc/" + std::to_string(pid_) + "/status");
+    for (std::string line; std::getline(in, line);)
+      if (line.rfind("Threads:", 0) == 0) return std::stoi(line.substr(8));
+    return -1;
+  }
+  /// Waits for the process to exit; returns its exit status (or -1 on timeout, -2 when killed by a signal).
+  int waitExit(std::chrono::milliseconds timeout) {
+    const auto deadline = Clock::now() + timeout;
+    while (Clock::now() < deadline) {
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        exited_ = true;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : -2;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return -1;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  int port_ = 0;
+  int log_fd_ = -1;
+  bool exited_ = false;
+  std::thread reader_;
+  std::mutex mu_;
+  std::string log_;
+};
+
+/// A mesh upload that sends one chunk and then waits (until cancelled or the server ends it).
+struct HeldUpload {
+  grpc::ClientContext ctx;
+  v1::UploadReply reply;
+  std::unique_ptr<grpc::ClientWriter<v1::UploadMeshChunk>> writer;
+  grpc::Status status;
+  void run(v1::DistanceField::Stub& stub) {
+    writer = stub.UploadMesh(&ctx, &reply);
+    v1::UploadMeshChunk chunk;
+    chunk.mutable_header()->set_format(v1::MESH_FORMAT_OBJ);
+    chunk.set_data("v 0 0 0\n");
+    writer->Write(chunk);
+    status = writer->Finish();  // returns when the server ends the call (or our context is cancelled)
+  }
+};
+
+TEST(ServerProcessTest, FiveHundredConcurrentCallsKeepTheThreadCount) {
+  ServerProcess server({"--threads", "2", "--max-queries", "2", "--max-streams", "64", "--idle-timeout", "30"});
+  ASSERT_GT(server.port(), 0) << server.log();
+  const int idle_threads = server.threads();
+  std::vector<std::shared_ptr<grpc::Channel>> channels;
+  std::vector<std::unique_ptr<v1::DistanceField::Stub>> stubs;
+  for (int c = 0; c < 8; ++c) {
+    grpc::ChannelArguments args;
+    args.SetInt("grpc.channel_id", c);  // distinct connections
+    channels.push_back(grpc::CreateCustomChannel(server.target(), grpc::InsecureChannelCredentials(), args));
+    stubs.push_back(v1::DistanceField::NewStub(channels.back()));
+  }
+  constexpr int kCalls = 500;
+  std::vector<HeldUpload> calls(kCalls);
+  std::vector<std::thread> clients;
+  std::atomic<int> peak{0};
+  std::atomic<bool> sampling{true};
+  std::thread sampler([&] {
+    while (sampling) {
+      peak = std::max(peak.load(), server.threads());
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+  });
+  for (int i = 0; i < kCalls; ++i) clients.emplace_back([&, i] { calls[size_t(i)].run(*stubs[size_t(i) % stubs.size()]); });
+  // Let every call reach the server; the ones beyond --max-streams are refused at once.
+  const auto deadline = Clock::now() + std::chrono::seconds(20);
+  auto refused = [&] {
+    int n = 0;
+    for (auto& c : calls) n += c.status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED;
+    return n;
+  };
+  while (Clock::now() < deadline && refused() < kCalls - 64) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  for (auto& c : calls) c.ctx.TryCancel();
+  for (auto& t : clients) t.join();
+  sampling = false;
+  sampler.join();
+  const int cap = 64 + 16;  // --grpc-threads default: --max-streams + 16
+  std::printf("server threads: idle %d, peak %d with %d concurrent calls (gRPC cap %d); %d refused at once\n",
+              idle_threads, peak.load(), kCalls, cap, refused());
+  EXPECT_EQ(refused(), kCalls - 64);
+  EXPECT_LE(peak.load(), cap + 16) << "threads must stay near the gRPC cap (compute arena, watchdog, main are extra)";
+}
+
+TEST(ServerProcessTest, SigtermDrainsAndExitsZero) {
+  ServerProcess server({"--threads", "2", "--grace-seconds", "20"});
+  ASSERT_GT(server.port(), 0) << server.log();
+  RemoteClient client(server.target());
+  std::atomic<bool> finished{false};
+  Streamed result;
+  // A query that takes a while (a 192^3 field without a limit), started before the signal.
+  std::thread q([&] {
+    result = stream(client, pointsRequest({{10, 10, 10}}, {192, 192, 192}, 1.0, 0, 0), 0);
+    finished = true;
+  });
+  const auto deadline = Clock::now() + std::chrono::seconds(10);
+  while (server.log().find("Query") == std::string::npos && result.batch_segments.empty() && Clock::now() < deadline &&
+         !finished)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  kill(server.pid(), SIGTERM);
+  const int code = server.waitExit(std::chrono::seconds(25));
+  q.join();
+  EXPECT_EQ(code, 0) << server.log();
+  EXPECT_TRUE(result.result.status.ok()) << "the running query must finish during the grace period: "
+                                         << result.result.status.error_message();
+}
+
+TEST(ServerProcessTest, ASecondSignalExitsWithinOneSecond) {
+  ServerProcess server({"--threads", "2", "--grace-seconds", "60"});
+  ASSERT_GT(server.port(), 0) << server.log();
+  HeldUpload held;  // keeps the drain waiting
+  auto stub = v1::DistanceField::NewStub(grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials()));
+  std::thread t([&] { held.run(*stub); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  kill(server.pid(), SIGTERM);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(server.waitExit(std::chrono::milliseconds(1)), -1) << "the first signal drains (60 s grace)";
+  const auto t0 = Clock::now();
+  kill(server.pid(), SIGTERM);
+  const int code = server.waitExit(std::chrono::seconds(5));
+  const double took = ms(Clock::now() - t0);
+  held.ctx.TryCancel();
+  t.join();
+  EXPECT_EQ(code, 1) << server.log();
+  EXPECT_LT(took, 1000);
+}
+
+TEST(ServerProcessTest, GraceExpiryCancelsStalledCallsAndExitsZero) {
+  ServerProcess server({"--threads", "2", "--grace-seconds", "0.5"});
+  ASSERT_GT(server.port(), 0) << server.log();
+  HeldUpload held;
+  auto stub = v1::DistanceField::NewStub(grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials()));
+  std::thread t([&] { held.run(*stub); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  const auto t0 = Clock::now();
+  kill(server.pid(), SIGTERM);
+  const int code = server.waitExit(std::chrono::seconds(5));
+  const double took = ms(Clock::now() - t0);
+  t.join();
+  EXPECT_EQ(code, 0) << server.log();
+  EXPECT_GE(took, 450);
+  EXPECT_LT(took, 1500);
+  // A call blocked on its client can only be ended by cancelling it.
+  EXPECT_EQ(held.status.error_code(), grpc::StatusCode::CANCELLED) << held.status.error_message();
+}
+
+}  // namespace
+}  // namespace distband
