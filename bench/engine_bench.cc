@@ -103,39 +103,7 @@ Input makeInput(const std::string& kase, int n) {
     }
   } else if (kase == "sphere_shell" || kase == "random_blobs") {
     in.volume = true;
-    in.mask.assign(size_t(n) * n * n, 0);
-    std::vector<std::pair<Vec3d, double>> balls;
-    if (kase == "sphere_shell") {
-      // A closed shell of thickness 2 voxels, radius 0.3 n, centre off the lattice symmetry.
-      const Vec3d c{0.5 * n + 0.25, 0.5 * n - 0.15, 0.5 * n + 0.35};
-      const double r = 0.3 * n;
-      tbb::parallel_for(0, n, [&](int z) {
-        for (int y = 0; y < n; ++y)
-          for (int x = 0; x < n; ++x) {
-            const double d = (Vec3d{double(x), double(y), double(z)} - c).length();
-            if (std::abs(d - r) <= 1.0) in.mask[(size_t(z) * n + y) * n + x] = 1;
-          }
-      });
-    } else {
-      // 40 solid balls, radius 2%..8% of n, centres in the inner 80% of the box.
-      std::mt19937_64 rng(7);
-      std::uniform_real_distribution<double> uc(0.1 * n, 0.9 * n), ur(0.02 * n, 0.08 * n);
-      for (int i = 0; i < 40; ++i) {
-        const double x = uc(rng), y = uc(rng), z = uc(rng), r = ur(rng);
-        balls.push_back({{x, y, z}, r});
-      }
-      tbb::parallel_for(0, n, [&](int z) {
-        for (int y = 0; y < n; ++y)
-          for (int x = 0; x < n; ++x) {
-            const Vec3d p{double(x), double(y), double(z)};
-            for (const auto& [c, r] : balls)
-              if ((p - c).lengthSqr() <= r * r) {
-                in.mask[(size_t(z) * n + y) * n + x] = 1;
-                break;
-              }
-          }
-      });
-    }
+    in.mask = kase == "sphere_shell" ? bench::sphereShellMask(n) : bench::randomBlobsMask(n);
   }
   return in;
 }
