@@ -171,17 +171,7 @@ Status DistanceFieldService::readUpload(grpc::ServerContext* context, grpc::Serv
       if (first->header().name().size() > 256)
         return Status::InvalidArgument(fmt::format("{}.header.name must be at most 256 bytes", what));
       if (Status s = on_header(*first, &expected_bytes); !s.ok()) return s;
-      // The upload's size, when known up front, is admitted (and reserved) before any byte is buffered.
-      if (expected_bytes > 0) {
-        if (Status s = budget_.reserve(expected_bytes, fmt::format("the upload ({} bytes)", expected_bytes),
-                                       std::chrono::milliseconds(options_.queue_wait_ms),
-                                       [&] { return context->IsCancelled() || call.interrupter().interrupted(); },
-                                       reservation);
-            !s.ok())
-          return s;
-        data->reserve(expected_bytes);
-      }
-    } else if (chunk.has_header()) {
+        } else if (chunk.has_header()) {
       return Status::InvalidArgument(fmt::format("{}: only the first chunk may carry `header`", what));
     }
     const uint64_t size = data->size() + chunk.data().size();
@@ -192,14 +182,17 @@ Status DistanceFieldService::readUpload(grpc::ServerContext* context, grpc::Serv
       return Status::InvalidArgument(
           fmt::format("{}.data: more data arrived ({}+ bytes) than the header declared ({})", what, size, expected_bytes));
     if (size > data->capacity()) {
-      // Grow by half (bounded by the upload limit); the old and the new buffer coexist while the bytes move.
-      const uint64_t grown = std::min<uint64_t>(options_.max_upload_bytes,
-                                                std::max<uint64_t>(size, data->capacity() + data->capacity() / 2 + 4096));
+      // Memory is reserved as bytes arrive, not when they are announced: a client that stalls holds only what it
+      // has sent. The buffer grows by half (to the declared size at most); old and new buffers coexist while the
+      // bytes move.
+      const uint64_t cap = data->capacity();
+      const uint64_t bound = expected_bytes > 0 ? expected_bytes : options_.max_upload_bytes;
+      const uint64_t grown = std::min<uint64_t>(bound, std::max<uint64_t>(size, cap + cap / 2 + (64 << 10)));
       if (!reservation->held()) budget_.tryReserve(0, reservation);
-      if (!reservation->tryGrow(grown + data->capacity() - std::min<uint64_t>(reservation->bytes(), data->capacity())))
+      if (!reservation->tryGrow(cap + grown - std::min<uint64_t>(reservation->bytes(), cap + grown)))
         return Status::ResourceExhausted(fmt::format(
             "{}.data: the upload has reached {} and needs {} more, but only {} of the server's memory budget is free",
-            what, humanBytes(data->size()), humanBytes(grown - data->capacity()), humanBytes(budget_.available())));
+            what, humanBytes(data->size()), humanBytes(grown - cap), humanBytes(budget_.available())));
       data->reserve(grown);
       reservation->shrinkTo(data->capacity());
     }

@@ -83,8 +83,8 @@ class DistanceFieldService final : public v1::DistanceField::Service {
   Status runCompute(grpc::ServerContext* context, ActiveCalls::Call& call, const std::function<Status()>& work);
 
   /// Reads an upload stream into `data`. `on_header` checks the first chunk's header and gives the data size it
-  /// promises (0: unknown); a known size is reserved at once, an unknown one grows with the data, both within the
-  /// memory budget and --max-upload-bytes.
+  /// promises (0: unknown). The buffer and its reservation in the memory budget grow with the bytes that arrive
+  /// (a stalled client holds only what it sent), never past the promised size or --max-upload-bytes.
   template <typename Chunk>
   Status readUpload(grpc::ServerContext* context, grpc::ServerReader<Chunk>* reader, ActiveCalls::Call& call,
                     const char* what, const std::function<Status(const Chunk&, uint64_t*)>& on_header,
