@@ -26,6 +26,7 @@
 #include <tbb/task_arena.h>
 
 #include "bench/bench_util.h"
+#include "tests/support/child_server.h"
 #include "client/remote_client.h"
 #include "core/engine.h"
 #include "core/mesh/mesh_grid.h"
@@ -40,49 +41,17 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 // ---- the server child process ----
-class ServerProcess {
+class ServerProcess : public ChildServer {
  public:
-  ServerProcess(const std::string& bin, int port, const std::vector<std::string>& extra) {
-    std::vector<std::string> args = {bin, "--listen", fmt::format("127.0.0.1:{}", port), "--log-level", "warn"};
-    args.insert(args.end(), extra.begin(), extra.end());
-    pid_ = fork();
-    if (pid_ == 0) {
-      std::vector<char*> argv;
-      for (auto& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      execv(bin.c_str(), argv.data());
-      std::perror("execv distband-server");
-      _exit(127);
-    }
-    target_ = fmt::format("127.0.0.1:{}", port);
-    RemoteClient probe(target_);
-    for (int i = 0; i < 200; ++i) {  // up to 10 s
-      bool serving = false;
-      if (probe.health("", &serving, nullptr, std::chrono::milliseconds(200)).ok() && serving) return;
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    }
-    throw std::runtime_error("distband-server did not become healthy");
+  ServerProcess(const std::string& bin, const std::vector<std::string>& extra) : ChildServer(bin, extra) {
+    if (port() == 0) throw std::runtime_error("distband-server did not start: " + log());
   }
   ~ServerProcess() {
-    if (pid_ > 0) {
-      kill(pid_, SIGTERM);
-      int status = 0;
-      waitpid(pid_, &status, 0);
-    }
+    signal(SIGTERM);
+    waitExit(std::chrono::seconds(30));
   }
-  const std::string& target() const { return target_; }
   /// VmRSS / VmHWM of the server in MB.
-  double rssMb(const char* field = "VmRSS:") const {
-    std::ifstream in(fmt::format("/proc/{}/status", pid_));
-    std::string line;
-    while (std::getline(in, line))
-      if (line.rfind(field, 0) == 0) return std::stod(line.substr(std::strlen(field))) / 1024.0;
-    return 0;
-  }
-
- private:
-  pid_t pid_ = -1;
-  std::string target_;
+  double rssMb(const char* field = "VmRSS:") const { return double(status(field)) / 1024.0; }
 };
 
 // ---- an order-independent checksum of a delivered field ----
@@ -165,7 +134,7 @@ int main(int argc, char** argv) {
   CLI::App app{"service_bench: loopback query cost vs the in-process engine, and server RSS under load"};
   std::string server_bin = DISTBAND_SERVER_BIN;
   std::string mesh_path = DISTBAND_BENCH_DIR "/../tests/data/meshes/bunny.obj";
-  int resolution = 256, threads = 2, repeat = 3, port = 50871;
+  int resolution = 256, threads = 2, repeat = 3;
   double segment_voxels = 4;
   int concurrent = 16, max_queries = 4, load_resolution = 256;
   double load_limit_voxels = 12;
@@ -181,7 +150,6 @@ int main(int argc, char** argv) {
   app.add_option("--load-resolution", load_resolution, "N of the load-test queries (bunny)")->capture_default_str();
   app.add_option("--load-limit-voxels", load_limit_voxels, "limit of the load-test queries, voxels")
       ->capture_default_str();
-  app.add_option("--port", port, "loopback port for the server")->capture_default_str();
   app.add_option("--json", json_path, "JSON output")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
@@ -207,7 +175,7 @@ int main(int argc, char** argv) {
   }
 
   {
-    ServerProcess server(server_bin, port, {"--threads", std::to_string(threads), "--max-queries", "4"});
+    ServerProcess server(server_bin, {"--threads", std::to_string(threads), "--max-queries", "4"});
     RemoteClient client(server.target());
 
     std::vector<Case> cases;
@@ -286,7 +254,7 @@ int main(int argc, char** argv) {
   // ---- load: concurrent queries on a server limited to max_queries ----
   std::string md_load;
   if (concurrent > 0) {
-    ServerProcess server(server_bin, port + 1,
+    ServerProcess server(server_bin,
                          {"--threads", std::to_string(threads), "--max-queries", std::to_string(max_queries)});
     RemoteClient client(server.target());
     v1::QueryRequest req;

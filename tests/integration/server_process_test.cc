@@ -19,91 +19,15 @@
 
 #include "client/remote_client.h"
 #include "tests/integration/service_fixture.h"
+#include "tests/support/child_server.h"
 
 namespace distband {
 namespace {
 
-/// distband-server started with `args` on 127.0.0.1:0; its log goes to a pipe read by a thread.
-class ServerProcess {
+/// The server binary this build made, as a child process.
+class ServerProcess : public ChildServer {
  public:
-  explicit ServerProcess(std::vector<std::string> args) {
-    int out[2];
-    if (pipe(out) != 0) return;
-    pid_ = fork();
-    if (pid_ == 0) {
-      dup2(out[1], 1);
-      dup2(out[1], 2);
-      close(out[0]);
-      std::vector<std::string> all = {DISTBAND_SERVER_BINARY, "--listen", "127.0.0.1:0"};
-      all.insert(all.end(), args.begin(), args.end());
-      std::vector<char*> argv;
-      for (auto& a : all) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      execv(argv[0], argv.data());
-      _exit(127);
-    }
-    close(out[1]);
-    log_fd_ = out[0];
-    reader_ = std::thread([this] {
-      char buf[4096];
-      for (ssize_t n; (n = read(log_fd_, buf, sizeof buf)) > 0;) {
-        std::lock_guard lock(mu_);
-        log_.append(buf, size_t(n));
-      }
-    });
-    const auto deadline = Clock::now() + std::chrono::seconds(10);
-    const std::regex port_re(R"(\(port (\d+),)");
-    while (Clock::now() < deadline && port_ == 0) {
-      std::smatch m;
-      const std::string text = log();
-      if (std::regex_search(text, m, port_re)) port_ = std::stoi(m[1]);
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-  }
-  ~ServerProcess() {
-    if (pid_ > 0 && !exited_) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-    }
-    if (reader_.joinable()) reader_.join();
-    if (log_fd_ >= 0) close(log_fd_);
-  }
-  int port() const { return port_; }
-  pid_t pid() const { return pid_; }
-  std::string target() const { return "127.0.0.1:" + std::to_string(port_); }
-  std::string log() {
-    std::lock_guard lock(mu_);
-    return log_;
-  }
-  /// Threads of the server process now (from /proc/PID/status).
-  int threads() const {
-    std::ifstream in("/proc/" + std::to_string(pid_) + "/status");
-    for (std::string line; std::getline(in, line);)
-      if (line.rfind("Threads:", 0) == 0) return std::stoi(line.substr(8));
-    return -1;
-  }
-  /// Waits for the process to exit; returns its exit status (or -1 on timeout, -2 when killed by a signal).
-  int waitExit(std::chrono::milliseconds timeout) {
-    const auto deadline = Clock::now() + timeout;
-    while (Clock::now() < deadline) {
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        exited_ = true;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : -2;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(2));
-    }
-    return -1;
-  }
-
- private:
-  pid_t pid_ = -1;
-  int port_ = 0;
-  int log_fd_ = -1;
-  bool exited_ = false;
-  std::thread reader_;
-  std::mutex mu_;
-  std::string log_;
+  explicit ServerProcess(const std::vector<std::string>& args) : ChildServer(DISTBAND_SERVER_BINARY, args) {}
 };
 
 /// A mesh upload that sends one chunk and then waits (until cancelled or the server ends it).
@@ -182,7 +106,7 @@ TEST(ServerProcessTest, SigtermDrainsAndExitsZero) {
          !finished)
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  kill(server.pid(), SIGTERM);
+  server.signal(SIGTERM);
   const int code = server.waitExit(std::chrono::seconds(25));
   q.join();
   EXPECT_EQ(code, 0) << server.log();
@@ -197,11 +121,11 @@ TEST(ServerProcessTest, ASecondSignalExitsWithinOneSecond) {
   auto stub = v1::DistanceField::NewStub(grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials()));
   std::thread t([&] { held.run(*stub); });
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  kill(server.pid(), SIGTERM);
+  server.signal(SIGTERM);
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   EXPECT_EQ(server.waitExit(std::chrono::milliseconds(1)), -1) << "the first signal drains (60 s grace)";
   const auto t0 = Clock::now();
-  kill(server.pid(), SIGTERM);
+  server.signal(SIGTERM);
   const int code = server.waitExit(std::chrono::seconds(5));
   const double took = ms(Clock::now() - t0);
   held.ctx.TryCancel();
@@ -218,7 +142,7 @@ TEST(ServerProcessTest, GraceExpiryCancelsStalledCallsAndExitsZero) {
   std::thread t([&] { held.run(*stub); });
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   const auto t0 = Clock::now();
-  kill(server.pid(), SIGTERM);
+  server.signal(SIGTERM);
   const int code = server.waitExit(std::chrono::seconds(5));
   const double took = ms(Clock::now() - t0);
   t.join();
