@@ -1,0 +1,22 @@
+// Fuzz target: the .npy reader (core/io/npy.h) on arbitrary bytes. On success the parsed array must be consistent:
+// payload size = prod(shape) * item size, rank 3 shapes within the grid limits for masks.
+#include <cstddef>
+#include <cstdint>
+#include <string_view>
+
+#include "core/io/npy.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  distband::NpyArray array;
+  const std::string error =
+      distband::parseNpy(std::string_view(reinterpret_cast<const char*>(data), size), "fuzz.npy", &array);
+  if (!error.empty()) return 0;
+  uint64_t elements = 1;
+  for (int64_t extent : array.shape) {
+    if (extent < 0) __builtin_trap();
+    elements *= uint64_t(extent);
+  }
+  const uint64_t item = array.descr.size() >= 3 ? uint64_t(array.descr.back() - '0') : 0;
+  if (item > 0 && item <= 8 && array.data.size() != elements * item) __builtin_trap();
+  return 0;
+}
