@@ -150,7 +150,6 @@ int run(int argc, char** argv) {
     }
   });
   Tally tally;
-  const auto t0 = Clock::now();
   std::vector<std::thread> clients;
   // 64 maximal queries, some cancelled at random.
   for (int c = 0; c < 64; ++c)

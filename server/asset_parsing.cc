@@ -1,16 +1,11 @@
 #include "server/asset_parsing.h"
 
-#include <unistd.h>
-
 #include <algorithm>
-#include <cstdio>
-#include <cstring>
-#include <filesystem>
 
 #include <fmt/format.h>
 
 #include "core/grid.h"
-#include "core/mesh/triangle_mesh.h"
+#include "core/mesh/mesh_reader.h"
 
 namespace distband {
 
@@ -40,47 +35,7 @@ std::string volumeAssetId(const v1::Dims& d, std::string_view bytes) {
   return "volume-" + sha256Hex({head, bytes});
 }
 
-namespace {
-
-// A temporary file that removes itself; loadMesh wants a path with the right extension.
-class TempFile {
- public:
-  std::string create(std::string_view bytes, std::string_view ext) {
-    std::string tmpl = (std::filesystem::temp_directory_path() / "distband-upload-XXXXXX.").string();
-    tmpl += ext;
-    const int fd = mkstemps(tmpl.data(), int(ext.size()) + 1);
-    if (fd < 0) return fmt::format("cannot create a temporary file: {}", std::strerror(errno));
-    path_ = tmpl;
-    size_t done = 0;
-    while (done < bytes.size()) {
-      const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-      if (n <= 0) {
-        ::close(fd);
-        return fmt::format("cannot write a temporary file: {}", std::strerror(errno));
-      }
-      done += size_t(n);
-    }
-    ::close(fd);
-    return {};
-  }
-  const std::string& path() const { return path_; }
-  ~TempFile() {
-    if (!path_.empty()) std::remove(path_.c_str());
-  }
-
- private:
-  std::string path_;
-};
-
-std::string replaceAll(std::string s, const std::string& from, const std::string& to) {
-  if (from.empty()) return s;
-  for (size_t pos = 0; (pos = s.find(from, pos)) != std::string::npos; pos += to.size()) s.replace(pos, from.size(), to);
-  return s;
-}
-
-}  // namespace
-
-uint64_t meshParsePeakBytes(uint64_t input_bytes) { return 64 * input_bytes + (uint64_t(1) << 20); }
+uint64_t meshParsePeakBytes(uint64_t input_bytes) { return meshReadPeakBytes(input_bytes); }
 
 Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::string& name, std::string_view field,
                       const MeshLimits& limits, const Interrupter* interrupter, std::shared_ptr<const Asset>* out) {
@@ -89,22 +44,18 @@ Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::
     return Status::InvalidArgument(
         fmt::format("{}.format must be one of MESH_FORMAT_OBJ, _OFF, _PLY, _STL (got {})", field, int(format)));
   if (bytes.empty()) return Status::InvalidArgument(fmt::format("{}: the mesh data is empty", field));
-  if (isInterrupted(interrupter)) return interrupter->status();
-  TempFile file;
-  if (std::string e = file.create(bytes, ext); !e.empty()) return Status::Internal(e);
+  MeshFormat parsed_format;
+  switch (format) {
+    case v1::MESH_FORMAT_OBJ: parsed_format = MeshFormat::kObj; break;
+    case v1::MESH_FORMAT_OFF: parsed_format = MeshFormat::kOff; break;
+    case v1::MESH_FORMAT_PLY: parsed_format = MeshFormat::kPly; break;
+    default: parsed_format = MeshFormat::kStl; break;
+  }
   auto asset = std::make_shared<Asset>();
   auto mesh = std::make_shared<TriangleMesh>();
-  std::string error = loadMesh(file.path(), mesh.get(), &asset->mesh_report);
-  if (!error.empty()) {
-    error = replaceAll(error, file.path(), name.empty() ? std::string("mesh") : name);
-    return Status::InvalidArgument(fmt::format("{}: {}", field, error));
-  }
-  if (uint64_t(asset->mesh_report.triangles) > limits.max_triangles)
-    return Status::ResourceExhausted(fmt::format("{}: the mesh has {} triangles, more than the server's limit of {}",
-                                                 field, asset->mesh_report.triangles, limits.max_triangles));
-  if (uint64_t(asset->mesh_report.vertices) > limits.max_vertices)
-    return Status::ResourceExhausted(fmt::format("{}: the mesh has {} vertices, more than the server's limit of {}",
-                                                 field, asset->mesh_report.vertices, limits.max_vertices));
+  const MeshReadLimits read_limits{limits.max_vertices, limits.max_triangles};
+  if (Status s = readMesh(bytes, parsed_format, read_limits, interrupter, mesh.get(), &asset->mesh_report); !s.ok())
+    return s.withPrefix(field);
   asset->kind = Asset::Kind::kMesh;
   asset->id = meshAssetId(bytes, format);
   asset->name = name;

@@ -29,7 +29,8 @@ struct MeshLimits {
   uint64_t max_triangles = uint64_t(1) << 24;
 };
 
-/// Upper bound on the bytes parseMeshAsset allocates for `input_bytes` of mesh data (the upload is admitted with it).
+/// Upper bound on the bytes parseMeshAsset allocates for `input_bytes` of mesh data, the data itself excluded (the
+/// parse is admitted with it; core/mesh/mesh_reader.h measures it).
 uint64_t meshParsePeakBytes(uint64_t input_bytes);
 
 Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::string& name, std::string_view field,
@@ -39,7 +40,8 @@ Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::
 Status parseVolumeAsset(const v1::Dims& dims, std::string bytes, const std::string& name, std::string_view field,
                         uint64_t max_voxels, const Interrupter* interrupter, std::shared_ptr<const Asset>* out);
 
-/// Peak bytes parseVolumeAsset allocates for a mask of `voxels` bytes (the mask copy and the brick footprint).
+/// Peak bytes parseVolumeAsset allocates for a mask of `voxels` bytes, the data itself excluded (the mask copy and
+/// the brick footprint).
 uint64_t volumeParsePeakBytes(uint64_t voxels);
 
 /// The cache id parseMeshAsset / parseVolumeAsset would give these bytes (so uploads can hit the cache first).

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/interrupter.h"
 #include "core/types.h"
 
 namespace distband {
@@ -33,14 +34,18 @@ struct MeshReport {
   std::string summary() const;     ///< one line for logs and the CLI
 };
 
-/// Loads `path` through assimp (joining identical vertices; polygons are fanned into triangles; nothing that moves
-/// geometry) and validates it with validateMesh(). Returns "" on success; otherwise "<path>: <problem>" and
-/// leaves `mesh` untouched. `report` may be null.
+/// The largest mesh file loadMesh reads (a local file: the CLI, benches and tests; the server never reads files).
+inline constexpr uint64_t kMaxMeshFileBytes = uint64_t(4) << 30;
+
+/// Loads a regular file `path` (.obj .off .ply .stl, by extension) into memory and parses it with readMesh
+/// (core/mesh/mesh_reader.h: polygons fanned, identical vertices welded, validated). Returns "" on success;
+/// otherwise "<path>: <problem>" and leaves `mesh` untouched. `report` may be null.
 std::string loadMesh(const std::string& path, TriangleMesh* mesh, MeshReport* report);
 
 /// Validates an in-memory mesh in place: rejects an empty mesh, non-finite coordinates and out-of-range
 /// indices; welds identical positions, drops degenerate triangles and unreferenced vertices, and fills `report`
-/// (may be null). Returns "" on success, otherwise the problem (the mesh is then unspecified).
-std::string validateMesh(TriangleMesh* mesh, MeshReport* report);
+/// (may be null). Returns "" on success, otherwise the problem (the mesh is then unspecified; "interrupted" when
+/// `interrupter` stopped it). Memory: ~40 bytes per vertex and 24 per triangle beyond the mesh itself.
+std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* interrupter = nullptr);
 
 }  // namespace distband
