@@ -1,4 +1,5 @@
 #include "client/compute_command.h"
+#include "client/interrupt_watch.h"
 
 #include <charconv>
 #include <chrono>
@@ -233,7 +234,8 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
                          a.threads > 0 ? std::to_string(a.threads) : std::string("all"));
   ctx.out.flush();
 
-  options.interrupted = ctx.interrupted;
+  InterruptWatch watch(ctx.interrupted);
+  options.interrupter = &watch.interrupter();
   auto t_segment = Clock::now();
   EngineResult result;
   try {

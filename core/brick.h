@@ -42,13 +42,14 @@ struct Brick {
   BrickMask mask;
 };
 
-/// The bricks finished by one segment of the propagation, delivered nearest-first. Every voxel within the
-/// limit is delivered exactly once over a run, in the segment whose range holds its |distance|.
+/// The bricks finished by one segment of the propagation (or a chunk of them), delivered nearest-first. Every voxel
+/// within the limit is delivered exactly once over a run, in the segment whose range holds its |distance|.
 struct SegmentBricks {
   int index = 0;               ///< 0-based segment number
   double lower_world = 0;      ///< |distance| range of the voxels delivered: (lower, upper]; segment 0 includes 0
   double upper_world = 0;
-  bool last = false;           ///< true for the final segment of a completed run
+  bool last = false;           ///< true for the final segment of a completed run (on its complete chunk)
+  bool complete = true;        ///< false on all but the last chunk of a segment (EngineOptions::max_chunk_bricks)
   std::vector<Brick> bricks;   ///< sorted by origin (z, y, x), one entry per brick with delivered voxels
 };
 

@@ -242,9 +242,7 @@ class BandRun {
     segment_vox_ = opt.segment_length_world / h;
   }
 
-  ~BandRun() {
-    for (auto& p : table_) delete p.load(std::memory_order_relaxed);
-  }
+  ~BandRun() { releaseBricks(); }
 
   EngineResult run();
 
@@ -262,6 +260,15 @@ class BandRun {
   const std::vector<Link>& linksFor(const Coord& local, uint32_t dir) const {
     auto cls = [](int v) { return v == 0 ? 0 : (v == kBrickSize - 1 ? 2 : 1); };
     return link_tables_[(cls(local.z) * 9 + cls(local.y) * 3 + cls(local.x)) * 32 + dir];
+  }
+
+  /// Whether the run must stop. Cheap (a relaxed load, and a clock read with a deadline): parallel loops call it once
+  /// per range, whose grain keeps a range well under a millisecond of work.
+  bool stopping() const {
+    if (stopped_.load(std::memory_order_relaxed)) return true;
+    if (!isInterrupted(opt_.interrupter)) return false;
+    stopped_.store(true, std::memory_order_relaxed);
+    return true;
   }
 
   uint32_t brickIndex(int x, int y, int z) const {
@@ -377,6 +384,7 @@ class BandRun {
   std::vector<uint32_t> pending_bricks_;
   FrontList deferred_;
   int64_t corrections_ = 0;
+  mutable std::atomic<bool> stopped_{false};  // the interrupter was seen tripped: every loop winds down
 };
 
 void BandRun::buildLinkTables() {
@@ -541,6 +549,7 @@ void BandRun::insertBand() {
   }
   step_ = 0;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    if (stopping()) return;
     ThreadBuffers& tb = buffers_.local();
     for (size_t i = r.begin(); i != r.end(); ++i) {
       const BandVoxel& v = band[i];
@@ -565,6 +574,7 @@ void BandRun::insertBand() {
 void BandRun::stepFromBand() {
   const auto& band = seeds_.band;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+    if (stopping()) return;
     ThreadBuffers& tb = buffers_.local();
     for (size_t i = r.begin(); i != r.end(); ++i) {
       const BandVoxel& v = band[i];
@@ -580,6 +590,7 @@ void BandRun::stepFromBand() {
 
 void BandRun::step(FrontList& front) {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+    if (stopping()) return;
     ThreadBuffers& tb = buffers_.local();
     for (size_t i = r.begin(); i != r.end(); ++i) pushFrom(front[i], tb);
   });
@@ -618,8 +629,10 @@ void BandRun::scanAndCheck() {
   };
   std::vector<uint32_t> uniform(n);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+    if (stopping()) return;
     for (size_t i = r.begin(); i != r.end(); ++i) uniform[i] = uniformSite(table_[pending_bricks_[i]].load(std::memory_order_relaxed));
   });
+  if (stopping()) return;
   // Of any brick by index: pending bricks from the table above, the others (all delivered) scanned on demand.
   auto uniformOf = [&](uint32_t bi) -> uint32_t {
     const auto it = std::lower_bound(pending_bricks_.begin(), pending_bricks_.end(), bi);
@@ -628,6 +641,7 @@ void BandRun::scanAndCheck() {
     return b ? uniformSite(b) : kEmpty;
   };
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+    if (stopping()) return;
     ThreadBuffers& tb = buffers_.local();
     uint64_t block[125];
     for (size_t i = r.begin(); i != r.end(); ++i) {
@@ -718,6 +732,7 @@ FrontList BandRun::correct(bool first_round) {
     // Visits the touched voxels within distance 2 of every changed voxel (each changed voxel once).
     auto aroundDirty = [&](auto&& visit) {
       tbb::parallel_for(tbb::blocked_range<size_t>(0, dirty.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
+        if (stopping()) return;
         for (size_t i = r.begin(); i != r.end(); ++i) {
           const BrickState* db = table_[dirty[i].brick].load(std::memory_order_relaxed);
           const Coord c = db->origin + brickLocal(dirty[i].offset);
@@ -846,6 +861,7 @@ void BandRun::collectPending() {
 // Voxels admitted beyond the previous threshold but not yet delivered start the new segment's lifespan clock.
 void BandRun::rearmLifespans() {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pending_bricks_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+    if (stopping()) return;
     for (size_t i = r.begin(); i != r.end(); ++i) {
       BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
       for (int off = 0; off < kBrickVoxels; ++off) {
@@ -857,19 +873,21 @@ void BandRun::rearmLifespans() {
   });
 }
 
-// Delivers every touched voxel within the threshold not delivered before. Returns whether this was the last
-// segment: the limit was reached, or nothing was deferred and no admitted voxel waits beyond the threshold.
+// Delivers every touched voxel within the threshold not delivered before, as one callback or (max_chunk_bricks) in
+// chunks. Returns whether this was the last segment: the limit was reached, or nothing was deferred and no admitted
+// voxel waits beyond the threshold.
 bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats) {
   collectPending();
   const double h = grid_.voxelSize();
   const size_t n = pending_bricks_.size();
   // Pass 1: which pending bricks deliver voxels now, and which keep voxels for later segments. The output is then
-  // built in chunks of pending bricks (sorted by index, which is (z, y, x) order of their origins), appended to an
-  // exactly reserved vector. In the last segment each chunk's engine bricks are freed as soon as it is built, so
-  // the output grows while the engine state shrinks instead of the two peaking together.
-  std::vector<uint32_t> slot(n, 0);  // 1 + position in the output, or 0
+  // built in chunks of pending bricks (sorted by index, which is (z, y, x) order of their origins). In the last
+  // segment each chunk's engine bricks are freed as soon as it is built, so the output grows while the engine state
+  // shrinks instead of the two peaking together.
+  std::vector<uint32_t> slot(n, 0);  // 1 + position in the segment's output, or 0
   std::vector<uint8_t> keep(n, 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
+    if (stopping()) return;
     for (size_t i = r.begin(); i != r.end(); ++i) {
       BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
       for (int off = 0; off < kBrickVoxels && !(slot[i] && keep[i]); ++off) {
@@ -880,44 +898,66 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
       }
     }
   });
+  if (stopping()) return true;
   uint32_t count = 0;
   for (uint32_t& s : slot) s = s ? ++count : 0;
   bool waiting = false;
   for (uint8_t kept : keep) waiting |= kept != 0;
   const bool last = thr_is_limit_ || (nothing_deferred && !waiting);
-  SegmentBricks seg;
-  seg.bricks.reserve(count);
   const bool triangles = seeds_.kind == SiteKind::kTriangle;
-  constexpr size_t kChunkBricks = 8192;
-  if (n <= kChunkBricks) {  // one chunk: built in place
-    seg.bricks.resize(count);
-    buildChunk(0, n, slot, keep, 0, triangles, seg.bricks);
-  }
+  auto piece = [&](bool complete) {
+    SegmentBricks p;
+    p.index = index;
+    p.lower_world = lower_vox * h;
+    p.upper_world = upper_vox * h;
+    p.last = last && complete;
+    p.complete = complete;
+    return p;
+  };
+  // Ranges [c0, c1) of pending bricks holding at most `per_chunk` output bricks each, built and handed over in turn.
+  const size_t per_chunk = opt_.max_chunk_bricks ? opt_.max_chunk_bricks : std::max<size_t>(count, 1);
+  constexpr size_t kBuildBricks = 8192;  // whole segments are built this many pending bricks at a time
+  SegmentBricks whole = piece(true);
+  whole.bricks.reserve(opt_.max_chunk_bricks ? 0 : count);
   std::vector<Brick> part;
-  for (size_t c0 = 0; n > kChunkBricks && c0 < n; c0 += kChunkBricks) {
-    const size_t c1 = std::min(n, c0 + kChunkBricks);
-    const uint32_t base = uint32_t(seg.bricks.size());  // slot - 1 of the chunk's first output brick
-    part.assign(std::count_if(slot.begin() + c0, slot.begin() + c1, [](uint32_t v) { return v != 0; }), Brick{});
+  size_t freed_bytes = 0;
+  uint32_t base = 0;  // output bricks before c0
+  for (size_t c0 = 0; c0 < n || (c0 == 0 && n == 0);) {
+    if (stopping()) return true;
+    size_t c1 = c0, outs = 0;
+    while (c1 < n && outs < per_chunk && c1 - c0 < kBuildBricks) outs += slot[c1++] != 0;
+    part.assign(outs, Brick{});
     buildChunk(c0, c1, slot, keep, base, triangles, part);
-    seg.bricks.insert(seg.bricks.end(), part.begin(), part.end());
     if (last) {
       for (size_t i = c0; i < c1; ++i) delete table_[pending_bricks_[i]].exchange(nullptr, std::memory_order_relaxed);
-      if (c1 < n) ::malloc_trim(0);  // the freed bricks' pages back before the next chunk's output (the last: below)
+      freed_bytes += (c1 - c0) * sizeof(BrickState);
+      if (freed_bytes >= (size_t(64) << 20) && c1 < n) {
+        ::malloc_trim(0);  // the freed bricks' pages back before the next chunk's output (the last: below)
+        freed_bytes = 0;
+      }
     }
+    for (const Brick& b : part) stats.voxels += b.mask.count();
+    stats.bricks += int64_t(part.size());
+    base += uint32_t(outs);
+    const bool done = c1 >= n;
+    if (opt_.max_chunk_bricks) {
+      if (stopping()) return true;
+      SegmentBricks p = piece(done);
+      p.bricks = std::move(part);
+      if (cb_) cb_(std::move(p));
+    } else {
+      whole.bricks.insert(whole.bricks.end(), part.begin(), part.end());
+    }
+    if (done) break;
+    c0 = c1;
   }
   std::vector<Brick>().swap(part);
   if (last) releaseBricks();
-  seg.index = index;
-  seg.lower_world = lower_vox * h;
-  seg.upper_world = upper_vox * h;
-  seg.last = last;
-  for (const Brick& b : seg.bricks) stats.voxels += b.mask.count();
-  stats.bricks = int64_t(seg.bricks.size());
   size_t w = 0;
   for (size_t i = 0; i < n; ++i)
     if (keep[i]) pending_bricks_[w++] = pending_bricks_[i];
   pending_bricks_.resize(w);
-  if (cb_) cb_(std::move(seg));
+  if (!opt_.max_chunk_bricks && cb_ && !stopping()) cb_(std::move(whole));
   return last;
 }
 
@@ -926,6 +966,7 @@ void BandRun::buildChunk(size_t c0, size_t c1, const std::vector<uint32_t>& slot
                          uint32_t base, bool triangles, std::vector<Brick>& out) {
   const double h = grid_.voxelSize();
   tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 16), [&](const tbb::blocked_range<size_t>& r) {
+    if (stopping()) return;
     uint32_t sites[kBrickVoxels];
     for (size_t i = r.begin(); i != r.end(); ++i) {
       BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
@@ -1059,7 +1100,7 @@ EngineResult BandRun::run() {
     // The outer boundary of the finished region seeds this segment: every offer held back, replayed with the site
     // it offered then (the voxel may hold a better one for itself now, but not for its neighbours).
     if (seg > 0) front = takeDeferred();
-    if (seg == 0 && push_band && !(opt_.interrupted && opt_.interrupted())) {
+    if (seg == 0 && push_band && !stopping()) {
       ++step_;
       ++stats.steps;
       stepFromBand();
@@ -1067,7 +1108,7 @@ EngineResult BandRun::run() {
       front = gatherFront();
     }
     for (;;) {
-      if (opt_.interrupted && opt_.interrupted()) {
+      if (stopping()) {
         result.interrupted = true;
         break;
       }
@@ -1099,6 +1140,10 @@ EngineResult BandRun::run() {
     }
     stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
     const bool last = emitSegment(seg, lower, upper, deferred_.empty(), stats);
+    if (stopping()) {
+      result.interrupted = true;
+      break;
+    }
     frozen2_ = thr2_;
     result.voxels += stats.voxels;
     result.segments.push_back(stats);

@@ -12,11 +12,17 @@
 //   * Storage is sparse: 8^3 bricks allocated when first touched, so memory follows the voxels inside the limit.
 //   * Compute runs on TBB. With options.threads > 0 it runs in a task_arena of that size, otherwise in the
 //     caller's arena. The result is bit-identical for any thread count.
-//   * `interrupted` is polled between steps; when it returns true the run stops and returns
-//     EngineResult::interrupted = true (bricks already delivered stay valid).
+//   * `interrupter` is polled inside every phase (band insertion, each propagation step's ranges, the second-ring
+//     correction, emission and the consumer's chunks), so a stop request ends the call within ~10 ms of work on
+//     each thread; the run then returns EngineResult::interrupted = true (bricks already delivered stay valid,
+//     nothing more is delivered).
+//   * With max_chunk_bricks = N > 0 a segment is handed over in chunks of at most N bricks, in (z, y, x) order,
+//     the last one marked `complete` (it may be empty); the next chunk is built only after the callback returned,
+//     so at most one chunk of output exists at a time and a callback that blocks pauses the engine. N = 0: one
+//     callback per segment.
 //   * Seeds are only read and must outlive the call; concurrent calls on the same or different seeds are fine.
-//   * Memory: 8.6 bytes per touched voxel (2 more in paper mode), in whole bricks, plus one segment's output bricks
-//     (in the last segment the engine's bricks are freed while the output is built).
+//   * Memory: 8.6 bytes per touched voxel (2 more in paper mode), in whole bricks, plus one segment's (or chunk's)
+//     output bricks (in the last segment the engine's bricks are freed while the output is built).
 #pragma once
 
 #include <cstdint>
@@ -29,6 +35,7 @@
 
 #include "core/brick.h"
 #include "core/grid.h"
+#include "core/interrupter.h"
 #include "core/seeds.h"
 #include "core/stencil.h"
 
@@ -61,7 +68,8 @@ struct EngineOptions {
   /// value; +infinity disables the lifespan (iterate until nothing changes). margin < 0 uses the default.
   double lifespan_alpha = -1;
   int lifespan_margin = -1;
-  std::function<bool()> interrupted;  ///< polled between steps; may be empty
+  const Interrupter* interrupter = nullptr;  ///< polled in every phase; may be null
+  size_t max_chunk_bricks = 0;               ///< > 0: hand segments over in chunks of at most this many bricks
 };
 
 struct SegmentStats {

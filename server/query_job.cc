@@ -17,9 +17,6 @@ double secondsBetween(QueryJob::Clock::time_point a, QueryJob::Clock::time_point
   return std::chrono::duration<double>(b - a).count();
 }
 
-// Whether a chunk handed over by the engine is the last of its segment.
-bool completesSegment(const SegmentBricks&) { return true; }
-
 }  // namespace
 
 QueryJob::QueryJob(ResolvedQuery query, tbb::task_arena* arena, uint64_t buffer_bytes, Interrupter* interrupter)
@@ -62,7 +59,8 @@ void QueryJob::run() {
       }
       EngineOptions options = query_.engine;
       options.threads = 0;  // the shared arena we are executing in
-      options.interrupted = [this] { return interrupter_->interrupted(); };
+      options.interrupter = interrupter_;
+      options.max_chunk_bricks = kQueryChunkBricks;
       segment_started_ = Clock::now();
       result_ = computeDistanceField(query_.grid, std::move(seeds), options,
                                      [this](SegmentBricks&& s) { emitChunk(std::move(s)); });
@@ -126,7 +124,7 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
   chunk.bricks.clear();
   chunk.bricks.shrink_to_fit();
   if (interrupter_->interrupted()) return;
-  if (completesSegment(chunk)) {
+  if (chunk.complete) {
     auto done = std::make_unique<v1::QueryReply>();
     v1::SegmentDone* d = done->mutable_segment_done();
     d->set_segment(uint32_t(chunk.index));

@@ -258,6 +258,7 @@ Status readPly(std::string_view bytes, const MeshReadLimits& limits, const Inter
       return Status::InvalidArgument(fmt::format(
           "PLY element '{}': the header declares {} records of at least {} bytes but only {} bytes follow ({})",
           meshExcerpt(e.name), e.count, min_record, cursor.remaining(), cursor.where()));
+    if (e.properties.empty()) continue;  // records of nothing take no bytes, however many are declared
     const bool vertex = e.name == "vertex", face = e.name == "face";
     if (vertex) out->vertices.reserve(size_t(e.count));
     if (face) out->triangles.reserve(size_t(e.count));

@@ -16,6 +16,7 @@
 #include <random>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <fmt/format.h>
@@ -628,7 +629,9 @@ TEST(EngineControl, InterruptBeforeTheFirstStep) {
   const Grid g({0, 0, 0}, 1.0, {64, 64, 64});
   const Seeds seeds = pointSeeds(g, {{10, 10, 10}});
   EngineOptions o;
-  o.interrupted = [] { return true; };
+  Interrupter stop;
+  stop.cancel();
+  o.interrupter = &stop;
   int64_t delivered = 0;
   const EngineResult r =
       computeDistanceField(g, seeds, o, [&](SegmentBricks&& s) { delivered += int64_t(s.bricks.size()); });
@@ -639,20 +642,109 @@ TEST(EngineControl, InterruptBeforeTheFirstStep) {
 TEST(EngineControl, InterruptAfterTheFirstSegmentStopsTheRun) {
   const Grid g({0, 0, 0}, 1.0, {64, 64, 64});
   const Seeds seeds = pointSeeds(g, {{10.2, 20.3, 30.4}});
-  bool stop = false;
+  Interrupter stop;
   int after_stop = 0, segments = 0;
   EngineOptions o;
   o.segment_length_world = 4;
-  o.interrupted = [&] { return stop; };
+  o.interrupter = &stop;
   const EngineResult r = computeDistanceField(g, seeds, o, [&](SegmentBricks&& s) {
-    if (stop) ++after_stop;
+    if (stop.interrupted()) ++after_stop;
     ++segments;
     EXPECT_FALSE(s.last);
-    stop = true;
+    stop.cancel();
   });
   EXPECT_TRUE(r.interrupted);
   EXPECT_EQ(segments, 1);
   EXPECT_EQ(after_stop, 0);
+}
+
+/// Everything a run delivers, brick by brick in delivery order, with each callback's segment and completeness.
+struct Delivery {
+  std::vector<std::pair<int, Brick>> bricks;  // (segment, brick)
+  std::vector<std::pair<int, bool>> calls;    // (segment, complete) of every callback
+  size_t largest_call = 0;
+};
+
+Delivery deliver(const Grid& g, const Seeds& seeds, EngineOptions o) {
+  Delivery d;
+  computeDistanceField(g, seeds, o, [&](SegmentBricks&& s) {
+    d.calls.push_back({s.index, s.complete});
+    d.largest_call = std::max(d.largest_call, s.bricks.size());
+    for (Brick& b : s.bricks) d.bricks.push_back({s.index, std::move(b)});
+  });
+  return d;
+}
+
+TEST(EngineControl, ChunkedEmissionDeliversTheSameBricksInTheSameOrder) {
+  const Grid g({0, 0, 0}, 1.0, {40, 36, 44});
+  const std::vector<uint8_t> mask = randomBlobs(g.dims(), 5, 99);
+  struct Case {
+    const char* name;
+    Seeds seeds;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"points", pointSeeds(g, {{3.2, 7.5, 30.1}, {33.3, 20.2, 4.4}})});
+  cases.push_back({"signed volume", volumeSeeds(g, mask, true)});
+  for (const Case& c : cases)
+    for (double segment : {0.0, 3.0}) {
+      EngineOptions o;
+      o.segment_length_world = segment;
+      o.limit_world = 14;
+      const Delivery whole = deliver(g, c.seeds, o);
+      o.max_chunk_bricks = 7;
+      const Delivery chunked = deliver(g, c.seeds, o);
+      ASSERT_EQ(whole.bricks.size(), chunked.bricks.size()) << c.name;
+      for (size_t i = 0; i < whole.bricks.size(); ++i) {
+        EXPECT_EQ(whole.bricks[i].first, chunked.bricks[i].first) << c.name << " brick " << i;
+        EXPECT_EQ(whole.bricks[i].second.origin, chunked.bricks[i].second.origin) << c.name << " brick " << i;
+        EXPECT_EQ(std::memcmp(&whole.bricks[i].second.mask, &chunked.bricks[i].second.mask, sizeof(BrickMask)), 0);
+        for (int v = 0; v < kBrickVoxels; ++v)
+          if (whole.bricks[i].second.mask.test(v))
+            ASSERT_EQ(whole.bricks[i].second.values[v], chunked.bricks[i].second.values[v]) << c.name;
+      }
+      EXPECT_LE(chunked.largest_call, 7u) << c.name;
+      // Every segment ends with exactly one complete chunk, and segments come in order.
+      int complete = 0;
+      for (size_t i = 0; i < chunked.calls.size(); ++i) {
+        complete += chunked.calls[i].second;
+        if (i > 0) EXPECT_GE(chunked.calls[i].first, chunked.calls[i - 1].first);
+        if (i > 0 && chunked.calls[i].first != chunked.calls[i - 1].first) EXPECT_TRUE(chunked.calls[i - 1].second);
+      }
+      EXPECT_EQ(complete, int(whole.calls.size())) << c.name;
+      EXPECT_TRUE(chunked.calls.back().second);
+    }
+}
+
+TEST(EngineControl, ADeadlineInThePastStopsTheRunAtOnce) {
+  const Grid g({0, 0, 0}, 1.0, {96, 96, 96});
+  const Seeds seeds = pointSeeds(g, {{10, 10, 10}});
+  Interrupter expired(Interrupter::Clock::now() - std::chrono::seconds(1));
+  EngineOptions o;
+  o.interrupter = &expired;
+  int callbacks = 0;
+  const EngineResult r = computeDistanceField(g, seeds, o, [&](SegmentBricks&&) { ++callbacks; });
+  EXPECT_TRUE(r.interrupted);
+  EXPECT_EQ(callbacks, 0);
+  EXPECT_EQ(expired.status().code(), Status::Code::kDeadlineExceeded);
+}
+
+TEST(EngineControl, CancelFromAnotherThreadStopsALongRun) {
+  const Grid g({0, 0, 0}, 1.0, {192, 192, 192});
+  const Seeds seeds = pointSeeds(g, {{10.5, 20.5, 30.5}, {150.2, 170.1, 20.3}});
+  Interrupter stop;
+  EngineOptions o;
+  o.interrupter = &stop;
+  o.threads = 2;
+  std::thread canceller([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(30));
+    stop.cancel();
+  });
+  const auto t0 = std::chrono::steady_clock::now();
+  const EngineResult r = computeDistanceField(g, seeds, o, [](SegmentBricks&&) {});
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  canceller.join();
+  EXPECT_TRUE(r.interrupted);
+  EXPECT_LT(seconds, 2.0) << "a generous bound: the latency itself is measured by bench/cancel_bench";
 }
 
 TEST(EngineControl, ModeNames) {

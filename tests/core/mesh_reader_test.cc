@@ -216,6 +216,11 @@ TEST(MeshReaderTest, HostileDeclaredCountsAreRefusedBeforeAnyAllocation) {
        Status::Code::kInvalidArgument, "truncated"},
       {"OFF face declaring a million corners", MeshFormat::kOff, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n1000000 0 1 2\n",
        Status::Code::kInvalidArgument, "declares 1000000 corners"},
+      {"PLY element of 2^60 empty records (found by fuzzing: it used to loop over them)", MeshFormat::kPly,
+       "ply\nformat ascii 1.0\nelement empty 1152921504606846976\nelement vertex 3\nproperty float x\n"
+       "property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+       "0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n",
+       Status::Code::kInvalidArgument, "out of range"},
       {"PLY vertex count over the limit", MeshFormat::kPly,
        "ply\nformat ascii 1.0\nelement vertex 2000\nproperty float x\nproperty float y\nproperty float z\n"
        "element face 0\nproperty list uchar int vertex_indices\nend_header\n" + repeat("0 0 0\n", 2000),

@@ -1,0 +1,6 @@
+// Fuzz target: the OFF reader (core/mesh/mesh_reader.h) on arbitrary bytes.
+#include "fuzz/mesh_fuzz.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  return fuzzMeshFormat(distband::MeshFormat::kOff, data, size);
+}
