@@ -97,13 +97,14 @@ struct Tally {
 int run(int argc, char** argv) {
   double seconds = 40;
   int budget_mib = 1536, threads = 2, max_queries = 4;
-  std::string tag = "hostile_load";
+  std::string tag = "hostile_load", server_log;
   CLI::App app{"hostile_load: the server under stalled, non-reading, cancelling and oversized clients"};
   app.add_option("--seconds", seconds, "length of the run (SIGTERM at 80 %)")->capture_default_str();
   app.add_option("--memory-budget-mib", budget_mib, "the server's --memory-budget")->capture_default_str();
   app.add_option("--threads", threads, "the server's --threads")->capture_default_str();
   app.add_option("--max-queries", max_queries, "the server's --max-queries")->capture_default_str();
   app.add_option("--tag", tag, "output name under bench/results/");
+  app.add_option("--server-log", server_log, "write the server's log to this file");
   CLI11_PARSE(app, argc, argv);
 
   const double idle_timeout = 3, grace = 3;
@@ -232,6 +233,7 @@ int run(int argc, char** argv) {
   // How long engines ran after the server saw a cancel (its log: engine_stop_after_cancel=...ms).
   std::vector<double> stop_ms;
   const std::string log = server.log();
+  if (!server_log.empty()) std::ofstream(server_log) << log;
   const std::regex re(R"(engine_stop_after_cancel=([0-9.]+)ms)");
   for (auto it = std::sregex_iterator(log.begin(), log.end(), re); it != std::sregex_iterator(); ++it)
     stop_ms.push_back(std::stod((*it)[1]));

@@ -60,7 +60,7 @@ struct SeedInput {
   std::string description;
 };
 
-std::string buildMeshInput(const ComputeArgs& a, SeedInput* in) {
+std::string buildMeshInput(const ComputeArgs& a, const Interrupter* interrupter, SeedInput* in) {
   if (!a.dims.empty()) return "--dims does not apply to --mesh (use --resolution or --voxel-size)";
   if ((a.resolution > 0) == a.voxel_size_given) return "--mesh needs exactly one of --resolution N or --voxel-size H";
   if (a.resolution < 0) return fmt::format("--resolution must be > 0 (got {})", a.resolution);
@@ -80,6 +80,7 @@ std::string buildMeshInput(const ComputeArgs& a, SeedInput* in) {
   go.padding_voxels = a.padding;
   if (std::string e = gridForMesh(mesh, go, &in->grid); !e.empty()) return e;
   so.limit_voxels = a.limit / in->grid.voxelSize();
+  so.interrupter = interrupter;
   if (std::string e = makeMeshSeeds(in->grid, mesh, so, &in->seeds); !e.empty()) return fmt::format("{}: {}", a.mesh, e);
   in->signed_distance = so.sign != SignMethod::kUnsigned;
   in->mesh = true;
@@ -89,14 +90,14 @@ std::string buildMeshInput(const ComputeArgs& a, SeedInput* in) {
   return {};
 }
 
-std::string buildSeedInput(const ComputeArgs& a, SeedInput* in) {
+std::string buildSeedInput(const ComputeArgs& a, const Interrupter* interrupter, SeedInput* in) {
   const int sources = int(!a.volume.empty()) + int(!a.points.empty()) + int(!a.mesh.empty());
   if (sources != 1)
     return "give exactly one seed source: --volume MASK.npy, --points \"x,y,z;...\" or --mesh FILE";
   if (a.signed_distance && a.volume.empty()) return "--signed needs --volume (meshes take --sign)";
   if (!(std::isfinite(a.voxel_size) && a.voxel_size > 0))
     return fmt::format("--voxel-size must be finite and > 0 (got {})", a.voxel_size);
-  if (!a.mesh.empty()) return buildMeshInput(a, in);
+  if (!a.mesh.empty()) return buildMeshInput(a, interrupter, in);
   if (a.resolution != 0) return "--resolution applies to --mesh only";
   in->signed_distance = a.signed_distance;
   Vec3d origin;
@@ -115,7 +116,7 @@ std::string buildSeedInput(const ComputeArgs& a, SeedInput* in) {
                          a.volume, mask_dims.z, mask_dims.y, mask_dims.x);
     in->grid = Grid(origin, voxel_size, mask_dims);
     if (std::string e = in->grid.validate(); !e.empty()) return e;
-    if (std::string e = makeVolumeSeeds(in->grid, *mask, a.signed_distance, &in->seeds); !e.empty())
+    if (std::string e = makeVolumeSeeds(in->grid, *mask, a.signed_distance, &in->seeds, interrupter); !e.empty())
       return fmt::format("{}: {}", a.volume, e);
     in->mask = mask;
     in->description = fmt::format("volume {} ({}x{}x{}, {})", a.volume, mask_dims.x, mask_dims.y, mask_dims.z,
@@ -212,8 +213,15 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
     return usage(fmt::format("--segment must be finite and >= 0 (got {})", a.segment));
   if (a.threads < 0) return usage(fmt::format("--threads must be >= 0 (got {})", a.threads));
 
+  InterruptWatch watch(ctx.interrupted);
   SeedInput in;
-  if (std::string e = buildSeedInput(a, &in); !e.empty()) return usage(e);
+  if (std::string e = buildSeedInput(a, &watch.interrupter(), &in); !e.empty()) {
+    if (watch.interrupter().interrupted()) {
+      ctx.err << "distband compute: interrupted; nothing written\n";
+      return kExitInterrupted;
+    }
+    return usage(e);
+  }
   if (std::string e = validateOptions(in.grid, options); !e.empty()) return usage(e);
 
   FieldLayout layout;
@@ -234,7 +242,6 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
                          a.threads > 0 ? std::to_string(a.threads) : std::string("all"));
   ctx.out.flush();
 
-  InterruptWatch watch(ctx.interrupted);
   options.interrupter = &watch.interrupter();
   auto t_segment = Clock::now();
   EngineResult result;

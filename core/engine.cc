@@ -30,6 +30,7 @@
 #include <tbb/task_arena.h>
 
 #include "core/geometry.h"
+#include "core/interruptible.h"
 
 namespace distband {
 
@@ -844,17 +845,22 @@ void BandRun::releaseBricks() {
       if (BrickState* b = table_[i].exchange(nullptr, std::memory_order_relaxed)) delete b, ++count;
     freed += count;
   });
-  // Worth a trim (a few ms) only when it hands back a sizeable amount.
-  if (freed * sizeof(BrickState) >= (size_t(64) << 20)) ::malloc_trim(0);
+  // Worth a trim (a few ms) only when it hands back a sizeable amount, and not on the way out of a stopped run: the
+  // next run of this process reuses the pages anyway.
+  if (freed * sizeof(BrickState) >= (size_t(64) << 20) && !stopping()) ::malloc_trim(0);
 }
 
-// Merges the bricks that got their first unemitted voxel into pending_bricks_, kept sorted by brick index.
+// Merges the bricks that got their first unemitted voxel into pending_bricks_, kept sorted by brick index. (Millions
+// of bricks on large grids: sorted in parallel, and stoppable.)
 void BandRun::collectPending() {
   for (auto& tb : buffers_) {
     pending_bricks_.insert(pending_bricks_.end(), tb.pending.begin(), tb.pending.end());
     tb.pending.clear();
   }
-  std::sort(pending_bricks_.begin(), pending_bricks_.end());
+  if (!runInterruptible(opt_.interrupter, [&] { tbb::parallel_sort(pending_bricks_.begin(), pending_bricks_.end()); })) {
+    stopped_.store(true);
+    return;
+  }
   pending_bricks_.erase(std::unique(pending_bricks_.begin(), pending_bricks_.end()), pending_bricks_.end());
 }
 
@@ -966,9 +972,9 @@ void BandRun::buildChunk(size_t c0, size_t c1, const std::vector<uint32_t>& slot
                          uint32_t base, bool triangles, std::vector<Brick>& out) {
   const double h = grid_.voxelSize();
   tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 16), [&](const tbb::blocked_range<size_t>& r) {
-    if (stopping()) return;
     uint32_t sites[kBrickVoxels];
     for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (stopping()) return;  // per brick: a mesh's winding-number sign can take milliseconds a brick
       BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
       if (!keep[i]) b->pending.store(false, std::memory_order_relaxed);
       if (!slot[i]) continue;
@@ -1047,7 +1053,10 @@ EngineResult BandRun::run() {
     auto same = [](const FrontEntry& a, const FrontEntry& b) {
       return a.brick == b.brick && a.offset == b.offset && a.site == b.site;
     };
-    tbb::parallel_sort(deferred_.begin(), deferred_.end(), order);
+    if (!runInterruptible(opt_.interrupter, [&] { tbb::parallel_sort(deferred_.begin(), deferred_.end(), order); })) {
+      stopped_.store(true);
+      return FrontList();
+    }
     deferred_.erase(std::unique(deferred_.begin(), deferred_.end(), same), deferred_.end());
     FrontList f;
     f.swap(deferred_);

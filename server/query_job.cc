@@ -46,7 +46,7 @@ void QueryJob::run() {
     arena_->execute([&] {
       const auto t0 = Clock::now();
       Seeds seeds;
-      const std::string e = buildSeeds(query_, &seeds);
+      const std::string e = buildSeeds(query_, &seeds, interrupter_);
       seed_seconds_ = secondsBetween(t0, Clock::now());
       if (interrupter_->interrupted()) {
         result_.interrupted = true;

@@ -6,12 +6,12 @@
 
 namespace distband {
 
-std::string buildSeeds(const ResolvedQuery& q, Seeds* seeds) {
+std::string buildSeeds(const ResolvedQuery& q, Seeds* seeds, const Interrupter* interrupter) {
   switch (q.seed_kind) {
     case ResolvedQuery::SeedKind::kPoints:
       return makePointSeeds(q.grid, q.points, seeds);
     case ResolvedQuery::SeedKind::kVolume:
-      return makeVolumeSeeds(q.grid, *q.asset->mask, q.sign == v1::SIGN_MODE_MASK_INSIDE, seeds);
+      return makeVolumeSeeds(q.grid, *q.asset->mask, q.sign == v1::SIGN_MODE_MASK_INSIDE, seeds, interrupter);
     case ResolvedQuery::SeedKind::kMesh: {
       MeshSeedOptions o;
       o.mode = q.mode == v1::PROPAGATION_MODE_PAPER ? MeshSiteMode::kPaper : MeshSiteMode::kExactFeature;
@@ -22,6 +22,7 @@ std::string buildSeeds(const ResolvedQuery& q, Seeds* seeds) {
         default: o.sign = SignMethod::kPseudonormal; break;
       }
       o.limit_voxels = q.engine.limit_world / q.grid.voxelSize();
+      o.interrupter = interrupter;
       return makeMeshSeeds(q.grid, *q.asset->mesh, o, seeds);
     }
   }

@@ -6,11 +6,14 @@
 
 #include <string>
 
+#include "core/interrupter.h"
 #include "core/seeds.h"
 #include "server/request_validation.h"
 
 namespace distband {
 
-std::string buildSeeds(const ResolvedQuery& query, Seeds* seeds);
+/// Builds the seeds of a resolved query, polling `interrupter` (may be null) throughout. "" on success, otherwise
+/// why not ("interrupted" when the interrupter tripped).
+std::string buildSeeds(const ResolvedQuery& query, Seeds* seeds, const Interrupter* interrupter = nullptr);
 
 }  // namespace distband

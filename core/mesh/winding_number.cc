@@ -10,15 +10,18 @@ constexpr uint32_t kLeafSize = 8;
 Vec3d centroid(const std::array<Vec3d, 3>& t) { return (t[0] + t[1] + t[2]) * (1.0 / 3.0); }
 }  // namespace
 
-WindingNumber::WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double beta)
-    : tris_(std::move(triangles)), beta2_(beta * beta) {
+WindingNumber::WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double beta, const Interrupter* interrupter)
+    : tris_(std::move(triangles)), beta2_(beta * beta), interrupter_(interrupter) {
   nodes_.reserve(2 * tris_.size() / kLeafSize + 2);
   if (!tris_.empty()) build(0, static_cast<uint32_t>(tris_.size()));
+  interrupter_ = nullptr;
 }
 
 uint32_t WindingNumber::build(uint32_t begin, uint32_t end) {
   const uint32_t id = static_cast<uint32_t>(nodes_.size());
   nodes_.push_back({});
+  // Nodes of thousands of triangles take milliseconds each level: poll there (a stopped build is discarded).
+  if (end - begin >= 4096 && isInterrupted(interrupter_)) return id;
   Node n{};
   n.begin = begin, n.end = end;
   double total = 0;

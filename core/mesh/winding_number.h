@@ -11,13 +11,17 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/interrupter.h"
 #include "core/types.h"
 
 namespace distband {
 
 class WindingNumber {
  public:
-  explicit WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double beta = 2.0);
+  /// Builds the hierarchy (O(T log T)); `interrupter` is polled while it is built: when it trips, the build stops
+  /// early and the object must not be queried.
+  explicit WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double beta = 2.0,
+                         const Interrupter* interrupter = nullptr);
   double query(const Vec3d& p) const;
   /// The exact sum over all triangles (O(T)); for checks.
   double exact(const Vec3d& p) const;
@@ -36,6 +40,7 @@ class WindingNumber {
   std::vector<std::array<Vec3d, 3>> tris_;
   std::vector<Node> nodes_;
   double beta2_;
+  const Interrupter* interrupter_ = nullptr;  ///< during the build only
 };
 
 }  // namespace distband

@@ -13,6 +13,7 @@
 #include <tbb/parallel_sort.h>
 
 #include "core/geometry.h"
+#include "core/interruptible.h"
 #include "core/mesh/winding_number.h"
 
 namespace distband {
@@ -76,11 +77,16 @@ Vec3d normalized(const Vec3d& v) {
 // Embree scene for ray parity; owns the device and scene for as long as a sign function refers to it.
 class ParityScene {
  public:
-  ParityScene(const std::vector<std::array<Vec3d, 3>>& tris) {
+  ParityScene(const std::vector<std::array<Vec3d, 3>>& tris, const Interrupter* interrupter) {
     device_ = rtcNewDevice(nullptr);
     if (!device_) return;
     scene_ = rtcNewScene(device_);
     rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    // Embree calls this while it builds the BVH; returning false cancels the build.
+    if (interrupter)
+      rtcSetSceneProgressMonitorFunction(
+          scene_, [](void* ptr, double) { return !static_cast<const Interrupter*>(ptr)->interrupted(); },
+          const_cast<Interrupter*>(interrupter));
     RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
     auto* v = static_cast<float*>(
         rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), tris.size() * 3));
@@ -237,8 +243,9 @@ struct MeshSigner {
   }
 };
 
-void buildPseudonormals(MeshSigner* s) {
+void buildPseudonormals(MeshSigner* s, const Interrupter* interrupter) {
   const size_t nt = s->corners.size();
+  auto stop = [&](size_t i) { return (i & 0xFFFF) == 0 && isInterrupted(interrupter); };
   std::vector<Vec3d> face(nt);
   std::vector<std::array<double, 3>> angles(nt);
   tbb::parallel_for(size_t(0), nt, [&](size_t t) {
@@ -251,8 +258,10 @@ void buildPseudonormals(MeshSigner* s) {
     }
   });
   std::vector<Vec3d> vertex(s->verts.size());
-  for (size_t t = 0; t < nt; ++t)
+  for (size_t t = 0; t < nt; ++t) {
+    if (stop(t)) return;
     for (int k = 0; k < 3; ++k) vertex[s->corners[t][k]] = vertex[s->corners[t][k]] + face[t] * angles[t][k];
+  }
   s->vertex_n.resize(vertex.size());
   for (size_t v = 0; v < vertex.size(); ++v) s->vertex_n[v] = Normal3f(normalized(vertex[v]));
   s->face_n.resize(nt);
@@ -274,6 +283,7 @@ void buildPseudonormals(MeshSigner* s) {
   });
   s->edge_n.resize(3 * nt);
   for (size_t i = 0; i < uses.size();) {
+    if (stop(i)) return;
     size_t j = i;
     Vec3d sum{};
     while (j < uses.size() && uses[j].key == uses[i].key) sum = sum + face[uses[j++].slot / 3];
@@ -289,9 +299,16 @@ struct Candidate {
 
 }  // namespace
 
-std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
-                          MeshSeedStats* stats) {
+namespace {
+
+// makeMeshSeeds' work, run under runInterruptible (every TBB task it starts stops when the interrupter trips); its
+// serial loops poll too.
+std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
+                           MeshSeedStats* stats) {
   const auto start = std::chrono::steady_clock::now();
+  const Interrupter* interrupter = options.interrupter;
+  // Serial loops over the triangles poll every 64 Ki of them.
+  auto stop = [&](size_t i) { return (i & 0xFFFF) == 0 && isInterrupted(interrupter); };
   if (std::string e = grid.validate(); !e.empty()) return "grid: " + e;
   if (mesh.triangles.empty()) return "the mesh has no triangles";
   if (!(options.band_radius_voxels > 0 && options.band_radius_voxels <= 8))
@@ -308,6 +325,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   std::vector<std::array<Vec3d, 3>> tris(nt);
   std::vector<Vec3d> normals(nt);
   for (size_t t = 0; t < nt; ++t) {
+    if (stop(t)) return "interrupted";
     for (int k = 0; k < 3; ++k) tris[t][k] = verts[mesh.triangles[t][k]];
     normals[t] = normalized((tris[t][1] - tris[t][0]).cross(tris[t][2] - tris[t][0]));
   }
@@ -337,6 +355,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
                      ((hi.z >> 3) - (lo.z >> 3) + 1);
   });
   for (size_t t = 0; t < nt; ++t) offsets[t + 1] += offsets[t];
+  if (isInterrupted(interrupter)) return "interrupted";
   std::vector<Candidate> cand(offsets[nt]);
   tbb::parallel_for(size_t(0), nt, [&](size_t t) {
     Coord lo, hi;
@@ -350,6 +369,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   tbb::parallel_sort(cand.begin(), cand.end(), [](const Candidate& a, const Candidate& b) {
     return a.brick < b.brick || (a.brick == b.brick && a.tri < b.tri);
   });
+  if (isInterrupted(interrupter)) return "interrupted";
   std::vector<size_t> starts;
   for (size_t i = 0; i < cand.size(); ++i)
     if (i == 0 || cand[i].brick != cand[i - 1].brick) starts.push_back(i);
@@ -409,6 +429,7 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
     for (int o = 0; o < kBrickVoxels; ++o)
       if (best_t[o] != kNoSite) v.push_back({borg + brickLocal(o), best_t[o]});
   });
+  if (isInterrupted(interrupter)) return "interrupted";
   const size_t scratch_bytes = cand.size() * sizeof(Candidate);
   std::vector<Candidate>().swap(cand);
   std::vector<size_t> band_at(nbricks + 1, 0);
@@ -447,14 +468,18 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
     case SignMethod::kPseudonormal:
       signer->verts = std::move(verts);
       signer->corners = mesh.triangles;
-      buildPseudonormals(signer.get());
+      buildPseudonormals(signer.get(), interrupter);
       break;
-    case SignMethod::kWinding: signer->winding = std::make_unique<WindingNumber>(tris); break;
+    case SignMethod::kWinding:
+      signer->winding = std::make_unique<WindingNumber>(tris, 2.0, interrupter);
+      break;
     case SignMethod::kParity:
-      signer->parity = std::make_unique<ParityScene>(tris);
+      signer->parity = std::make_unique<ParityScene>(tris, interrupter);
+      if (isInterrupted(interrupter)) return "interrupted";
       if (!signer->parity->ok()) return "cannot create the Embree device for parity signs";
       break;
   }
+  if (isInterrupted(interrupter)) return "interrupted";
   if (options.sign != SignMethod::kUnsigned)
     seeds.sign = [signer](Brick& brick, const uint32_t* sites) { signer->sign(brick, sites); };
   if (seeds.kind == SiteKind::kTriangle) seeds.triangles = std::move(tris);
@@ -469,6 +494,18 @@ std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mesh
   }
   *out = std::move(seeds);
   return {};
+}
+
+}  // namespace
+
+std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
+                          MeshSeedStats* stats) {
+  std::string error;
+  Seeds seeds;
+  if (!runInterruptible(options.interrupter, [&] { error = buildMeshSeeds(grid, mesh, options, &seeds, stats); }))
+    return "interrupted";
+  if (error.empty()) *out = std::move(seeds);
+  return error;
 }
 
 }  // namespace distband

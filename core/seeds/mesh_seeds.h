@@ -25,6 +25,7 @@
 #include <string_view>
 
 #include "core/grid.h"
+#include "core/interrupter.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds.h"
 
@@ -43,6 +44,9 @@ struct MeshSeedOptions {
   SignMethod sign = SignMethod::kPseudonormal;
   double band_radius_voxels = 1.5;  ///< initial band: voxels within this distance of a triangle, in (0, 8]
   double limit_voxels = std::numeric_limits<double>::infinity();  ///< band voxels beyond are dropped
+  /// Polled throughout (the scan, sorts, sign tables, the winding-number tree, Embree's BVH build); when it trips,
+  /// makeMeshSeeds returns "interrupted".
+  const Interrupter* interrupter = nullptr;
 };
 
 struct MeshSeedStats {

@@ -6,7 +6,8 @@
 
 namespace distband {
 
-std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out) {
+std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out,
+                            const Interrupter* interrupter) {
   if (static_cast<int64_t>(mask.size()) != grid.voxelCount())
     return fmt::format("mask has {} voxels, the grid {}", mask.size(), grid.voxelCount());
   const Coord d = grid.dims();
@@ -25,7 +26,8 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
   // Site ids of boundary voxels, so a neighbour across the boundary can name it.
   std::vector<uint32_t> site_of;
   if (signed_distance) site_of.assign(mask.size(), kNoSite);
-  for (int z = 0; z < d.z; ++z)
+  for (int z = 0; z < d.z; ++z) {
+    if (isInterrupted(interrupter)) return "interrupted";
     for (int y = 0; y < d.y; ++y)
       for (int x = 0; x < d.x; ++x) {
         const int64_t i = (int64_t(z) * d.y + y) * d.x + x;
@@ -43,12 +45,14 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
           seeds.points.push_back({double(x), double(y), double(z)});
         }
       }
+  }
   if (n_inside == 0) return "the seed mask has no nonzero voxel";
   if (signed_distance) {
     if (n_inside == grid.voxelCount()) return "the seed mask has no zero voxel, so a signed field is undefined";
     // Each boundary voxel starts with the nearest voxel across the boundary (a 6-neighbour, distance 1):
     // the lowest site id among them, so the choice does not depend on scan order.
-    for (int z = 0; z < d.z; ++z)
+    for (int z = 0; z < d.z; ++z) {
+      if (isInterrupted(interrupter)) return "interrupted";
       for (int y = 0; y < d.y; ++y)
         for (int x = 0; x < d.x; ++x) {
           const int64_t i = (int64_t(z) * d.y + y) * d.x + x;
@@ -66,8 +70,12 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
           consider(z + 1 < d.z, i + sz);
           seeds.band.push_back({{x, y, z}, best});
         }
+    }
     auto region = std::make_shared<std::vector<uint8_t>>(mask.size());
-    for (size_t i = 0; i < mask.size(); ++i) (*region)[i] = mask[i] != 0;
+    for (size_t i = 0; i < mask.size(); ++i) {
+      if (i % (size_t(1) << 22) == 0 && isInterrupted(interrupter)) return "interrupted";
+      (*region)[i] = mask[i] != 0;
+    }
     seeds.region = region;
     const Grid g = grid;
     seeds.sign = [region, g](Brick& brick, const uint32_t*) {

@@ -4,7 +4,8 @@
 //             distance_transform_edt(mask == 0) * voxel_size; 0 on the mask.
 //   signed:   outside (mask == 0): +distance to the nearest mask voxel; inside: -distance to the nearest
 //             non-mask voxel, i.e. edt(mask == 0) - edt(mask != 0).
-// Returns an error string for a size mismatch, an empty mask, or (signed) a mask with no outside voxel.
+// Returns an error string for a size mismatch, an empty mask, or (signed) a mask with no outside voxel; "interrupted"
+// when `interrupter` (polled every z-slice) stopped it.
 #pragma once
 
 #include <cstdint>
@@ -12,10 +13,12 @@
 #include <vector>
 
 #include "core/grid.h"
+#include "core/interrupter.h"
 #include "core/seeds.h"
 
 namespace distband {
 
-std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out);
+std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out,
+                            const Interrupter* interrupter = nullptr);
 
 }  // namespace distband

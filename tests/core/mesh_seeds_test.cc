@@ -9,6 +9,7 @@
 #include <map>
 #include <numbers>
 #include <set>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -18,6 +19,7 @@
 #include "core/mesh/triangle_mesh.h"
 #include "core/mesh/winding_number.h"
 #include "core/seeds/mesh_seeds.h"
+#include "core/seeds/volume_seeds.h"
 #include "tests/support/brute_mesh.h"
 
 namespace distband {
@@ -353,6 +355,48 @@ TEST(MeshSeedsTest, RejectsBadInputAndParsesNames) {
     EXPECT_EQ(signMethodName(sign), n);
   }
   EXPECT_FALSE(parseSignMethod("normal", &sign));
+}
+
+}  // namespace
+}  // namespace distband
+
+namespace distband {
+namespace {
+
+TEST(MeshSeedsTest, AStoppedInterrupterStopsEverySeedBuilder) {
+  const TriangleMesh bunny = load("bunny.obj");
+  const Grid grid = gridFor(bunny, 128, 3);
+  Interrupter stop;
+  stop.cancel();
+  for (SignMethod sign : {SignMethod::kPseudonormal, SignMethod::kWinding, SignMethod::kParity, SignMethod::kUnsigned})
+    for (MeshSiteMode mode : {MeshSiteMode::kExactFeature, MeshSiteMode::kPaper}) {
+      MeshSeedOptions so;
+      so.sign = sign;
+      so.mode = mode;
+      so.interrupter = &stop;
+      Seeds seeds;
+      EXPECT_EQ(makeMeshSeeds(grid, bunny, so, &seeds), "interrupted") << signMethodName(sign);
+      EXPECT_TRUE(seeds.band.empty());
+    }
+  // A cancel from another thread while the scan runs (a large grid) stops it too.
+  Interrupter later;
+  std::thread canceller([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    later.cancel();
+  });
+  MeshSeedOptions so;
+  so.sign = SignMethod::kWinding;
+  so.interrupter = &later;
+  Seeds seeds;
+  const std::string e = makeMeshSeeds(gridFor(bunny, 1024, 3), bunny, so, &seeds);
+  canceller.join();
+  EXPECT_TRUE(e == "interrupted" || e.empty()) << e;
+  // And a volume's seeds.
+  Seeds volume;
+  const Grid g({0, 0, 0}, 1.0, {64, 64, 64});
+  std::vector<uint8_t> mask(size_t(g.voxelCount()), 0);
+  mask[1000] = 1;
+  EXPECT_EQ(makeVolumeSeeds(g, mask, true, &volume, &stop), "interrupted");
 }
 
 }  // namespace

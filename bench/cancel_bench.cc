@@ -1,0 +1,196 @@
+// cancel_bench: how long each phase of a computation keeps running after its Interrupter trips (the service's goal:
+// 100 ms at most, in every phase, at 1024^3 too). For each case the work runs once uncancelled (its duration T),
+// then --samples times with a cancel from another thread at a random moment in [2 %, 98 %] of T (seeded, so runs
+// are comparable); the latency is the time from cancel() to the call's return, when no thread of it uses CPU.
+//
+//   build/bench/cancel_bench [--resolution 1024] [--threads 2] [--samples 10] [--cases all|a,b] [--mesh-dir DIR]
+//
+// Cases: mesh seeds with each sign method (armadillo if --mesh-dir has it, else the bunny; half-width 3), the engine
+// on two points (full domain: propagation, second-ring correction and emission in one segment; and in 8 segments),
+// a limited band around a sphere shell volume (seeds and engine), and emission alone (the consumer cancels from
+// inside a chunk callback, so the engine is mid-emission). Output: a markdown table (median and max per case).
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <tbb/task_arena.h>
+
+#include "bench/bench_util.h"
+#include "core/engine.h"
+#include "core/mesh/mesh_grid.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/seeds/mesh_seeds.h"
+#include "core/seeds/point_seeds.h"
+#include "core/seeds/volume_seeds.h"
+
+#ifndef DISTBAND_BENCH_DIR
+#define DISTBAND_BENCH_DIR "bench"
+#endif
+
+namespace distband {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+struct Case {
+  std::string name;
+  /// Runs the work once with `interrupter` (never null); returns whether it was stopped early.
+  std::function<bool(Interrupter&)> run;
+  /// Cancel from inside the work instead of at a random moment (emission).
+  bool self_cancel = false;
+};
+
+int run(int argc, char** argv) {
+  int resolution = 1024, threads = 2, samples = 10;
+  std::string cases_arg = "all", mesh_dir = std::string(DISTBAND_BENCH_DIR) + "/../tests/data/meshes",
+              tag = "cancel_bench";
+  CLI::App app{"cancel_bench: CPU-stop latency after a cancel, per phase"};
+  app.add_option("--resolution", resolution, "grid size N (N^3)")->capture_default_str();
+  app.add_option("--threads", threads, "TBB threads")->capture_default_str();
+  app.add_option("--samples", samples, "cancels per case")->capture_default_str();
+  app.add_option("--cases", cases_arg, "all, or a comma-separated list");
+  app.add_option("--mesh-dir", mesh_dir, "where armadillo.off (or bunny.obj) is");
+  app.add_option("--tag", tag, "output name under bench/results/");
+  CLI11_PARSE(app, argc, argv);
+  tbb::task_arena arena(threads);
+  const int n = resolution;
+
+  TriangleMesh mesh;
+  std::string mesh_name = "armadillo.off";
+  if (!loadMesh(mesh_dir + "/" + mesh_name, &mesh, nullptr).empty()) {
+    mesh_name = "bunny.obj";
+    if (std::string e = loadMesh(mesh_dir + "/" + mesh_name, &mesh, nullptr); !e.empty()) {
+      std::fprintf(stderr, "%s\n", e.c_str());
+      return 1;
+    }
+  }
+  Grid mesh_grid;
+  MeshGridOptions go;
+  go.resolution = n;
+  gridForMesh(mesh, go, &mesh_grid);
+  const Grid grid({0, 0, 0}, 1.0, {n, n, n});
+  const std::vector<Vec3d> two_points = {{n * 0.31, n * 0.42, n * 0.53}, {n * 0.77, n * 0.18, n * 0.66}};
+  std::vector<uint8_t> shell;  // made on first use
+  Clock::time_point self_cancelled{};  // when a case cancelled itself from inside its callback
+
+  auto meshSeeds = [&](SignMethod sign) {
+    return [&, sign](Interrupter& stop) {
+      MeshSeedOptions so;
+      so.sign = sign;
+      so.limit_voxels = 3;
+      so.interrupter = &stop;
+      Seeds seeds;
+      return makeMeshSeeds(mesh_grid, mesh, so, &seeds) == "interrupted";
+    };
+  };
+  auto engine = [&](double segment, double limit, size_t chunk, std::function<bool(const SegmentBricks&)> cancel_in) {
+    return [&, segment, limit, chunk, cancel_in](Interrupter& stop) {
+      Seeds seeds;
+      makePointSeeds(grid, two_points, &seeds);
+      EngineOptions o;
+      o.segment_length_world = segment;
+      o.limit_world = limit;
+      o.max_chunk_bricks = chunk;
+      o.interrupter = &stop;
+      return computeDistanceField(grid, std::move(seeds), o, [&](SegmentBricks&& s) {
+               if (cancel_in && cancel_in(s)) {
+                 self_cancelled = Clock::now();
+                 stop.cancel();
+               }
+             }).interrupted;
+    };
+  };
+  auto shellBand = [&](Interrupter& stop) {
+    if (shell.empty()) shell = bench::sphereShellMask(n);
+    Seeds seeds;
+    if (makeVolumeSeeds(grid, shell, true, &seeds, &stop) == "interrupted") return true;
+    EngineOptions o;
+    o.limit_world = 5;
+    o.interrupter = &stop;
+    return computeDistanceField(grid, std::move(seeds), o, [](SegmentBricks&&) {}).interrupted;
+  };
+  int chunks_seen = 0;
+  std::vector<Case> cases = {
+      {"mesh seeds, pseudonormal", meshSeeds(SignMethod::kPseudonormal)},
+      {"mesh seeds, winding number", meshSeeds(SignMethod::kWinding)},
+      {"mesh seeds, parity (Embree)", meshSeeds(SignMethod::kParity)},
+      {"engine, two points, full domain", engine(0, std::numeric_limits<double>::infinity(), 1024, {})},
+      {"engine, two points, 8 segments", engine(n / 4.0, std::numeric_limits<double>::infinity(), 1024, {})},
+      {"sphere shell volume, limit 5 (seeds + engine)", shellBand},
+      {"emission (cancelled inside the k-th chunk)",
+       engine(0, std::numeric_limits<double>::infinity(), 1024, [&](const SegmentBricks&) { return --chunks_seen == 0; }),
+       true},
+  };
+  const std::vector<std::string> short_names = {"seeds_pseudonormal", "seeds_winding", "seeds_parity", "points_full",
+                                                "points_segments", "shell_band", "emission"};
+
+  std::string md = fmt::format("# cancel_bench ({}^3, {} threads, {} samples per case; mesh {})\n\n", n, threads,
+                               samples, mesh_name);
+  md += "| case | uncancelled run (s) | stop latency median (ms) | max (ms) | stopped early |\n|---|---|---|---|---|\n";
+  std::printf("%s", md.c_str());
+  std::mt19937 rng(2026);
+  double worst = 0;
+  for (size_t c = 0; c < cases.size(); ++c) {
+    if (cases_arg != "all" && ("," + cases_arg + ",").find("," + short_names[c] + ",") == std::string::npos) continue;
+    const Case& kase = cases[c];
+    double full_ms = 0;
+    arena.execute([&] {
+      Interrupter never;
+      chunks_seen = 1 << 30;
+      const auto t0 = Clock::now();
+      kase.run(never);
+      full_ms = msSince(t0);
+    });
+    std::vector<double> latency;
+    int stopped = 0;
+    for (int i = 0; i < samples; ++i) {
+      Interrupter stop;
+      const double at_ms = std::uniform_real_distribution<double>(0.02, 0.98)(rng) * full_ms;
+      Clock::time_point cancelled{};
+      std::thread canceller;
+      if (kase.self_cancel) {
+        chunks_seen = 1 + int(rng() % 64);
+      } else {
+        canceller = std::thread([&] {
+          std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(at_ms));
+          cancelled = Clock::now();
+          stop.cancel();
+        });
+      }
+      bool early = false;
+      arena.execute([&] { early = kase.run(stop); });
+      const auto end = Clock::now();
+      if (canceller.joinable()) canceller.join();
+      if (kase.self_cancel) cancelled = self_cancelled;
+      if (!early) continue;  // finished before the cancel
+      ++stopped;
+      latency.push_back(std::chrono::duration<double, std::milli>(end - cancelled).count());
+    }
+    const double med = latency.empty() ? 0 : bench::median(latency);
+    const double mx = latency.empty() ? 0 : *std::max_element(latency.begin(), latency.end());
+    worst = std::max(worst, mx);
+    const std::string row = fmt::format("| {} | {:.2f} | {:.1f} | {:.1f} | {} / {} |\n", kase.name, full_ms / 1000, med,
+                                        mx, stopped, samples);
+    std::printf("%s", row.c_str());
+    std::fflush(stdout);
+    md += row;
+  }
+  md += fmt::format("\nWorst stop latency: {:.1f} ms (goal: at most 100 ms).\n", worst);
+  std::printf("\nWorst stop latency: %.1f ms\n", worst);
+  std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md;
+  return worst <= 100 ? 0 : 3;
+}
+
+}  // namespace
+}  // namespace distband
+
+int main(int argc, char** argv) { return distband::run(argc, argv); }
