@@ -1,14 +1,17 @@
 # syntax=docker/dockerfile:1
-# distband-server container: a build stage with the full toolchain, a runtime stage with only the shared
-# libraries the binaries load, running as a non-root user.
+# distband-server container: a build stage with the toolchain, a runtime stage with only the shared libraries
+# the server and its health probe load, running as the non-root uid/gid 10001.
 #
-#   docker build -t distband:latest .
-#   docker run --rm -p 50051:50051 distband:latest --threads 4 --max-queries 4
-#   docker run --rm --network host --entrypoint distband distband:latest info --server 127.0.0.1:50051
+#   scripts/container build        podman, no registry needed: makes debian:bookworm-slim with debootstrap
+#   docker build -t distband:latest .                     the same Dockerfile where a registry is reachable
+#   docker run --rm -p 50051:50051 distband:latest --listen 0.0.0.0:50051 --threads 4 --max-queries 4
 #
-# Health: the image has no probe binary, so there is no Docker HEALTHCHECK. The server serves the standard
-# grpc.health.v1 service; Kubernetes probes it natively (deploy/k8s/deployment.yaml, `grpc: port: 50051`), and
-# `distband health --server HOST:PORT` checks it by hand.
+# Arguments after the image name replace CMD, so pass `--listen 0.0.0.0:50051` again with any other flag: the
+# server's own default listens on loopback only, and --listen may be given only once.
+#
+# The image ships distband-server (the entrypoint) and distband-health (the HEALTHCHECK: grpc.health.v1 Check,
+# exit 0 iff SERVING), not the distband CLI: the CLI writes .vdb level sets and PNG slices, so it loads OpenVDB
+# and libpng (~60 MB of libraries the server does not use). Query a container with the CLI from outside it.
 
 ARG DEBIAN_IMAGE=debian:bookworm-slim
 
@@ -16,31 +19,54 @@ ARG DEBIAN_IMAGE=debian:bookworm-slim
 FROM ${DEBIAN_IMAGE} AS build
 SHELL ["/bin/bash", "-o", "pipefail", "-c"]
 WORKDIR /src
-# Dependencies first, so the (slow) package layer is reused while only the sources change.
+# Dependencies first, so the (slow) package layer is reused while only the sources change; only the build group
+# (no test, benchmark or Python packages).
 COPY scripts/install-deps scripts/install-deps
-RUN scripts/install-deps && rm -rf /var/lib/apt/lists/*
-COPY . .
+RUN scripts/install-deps build && rm -rf /var/lib/apt/lists/*
+# Only what CMake reads (bench/ and tests/ are configured even with tests off), so edits to docs, deploy files
+# or scripts do not recompile.
+COPY CMakeLists.txt ./
+COPY proto proto
+COPY core core
+COPY server server
+COPY client client
+COPY bench bench
+COPY tests tests
+# --as-needed (Debian's gcc default, explicit for other toolchains): the server and the probe record only the
+# libraries they call, not OpenVDB/libpng that the core library's link interface lists.
 RUN cmake -S . -B /build -G Ninja -DCMAKE_BUILD_TYPE=Release -DDISTBAND_BUILD_TESTS=OFF \
- && cmake --build /build --target distband-server distband -j"$(nproc)" \
+          -DCMAKE_EXE_LINKER_FLAGS="-Wl,--as-needed" >/dev/null \
+ && cmake --build /build --target distband-server distband-health -j"$(nproc)" \
  && mkdir -p /out \
- && cp /build/server/distband-server /build/client/distband /out/ \
- && strip --strip-unneeded /out/distband-server /out/distband
+ && cp /build/server/distband-server /build/client/distband-health /out/ \
+ && strip --strip-unneeded /out/distband-server /out/distband-health
 
 # ---- runtime -----------------------------------------------------------------------------------------------
 FROM ${DEBIAN_IMAGE} AS runtime
 SHELL ["/bin/bash", "-o", "pipefail", "-c"]
 COPY scripts/install-runtime-deps /usr/local/lib/distband/install-runtime-deps
-RUN /usr/local/lib/distband/install-runtime-deps && rm -rf /var/lib/apt/lists/*
-COPY --from=build /out/distband-server /out/distband /usr/local/bin/
+# Library packages only, then no apt lists, caches or logs in the layer.
+RUN /usr/local/lib/distband/install-runtime-deps server \
+ && apt-get clean \
+ && rm -rf /var/lib/apt/lists/* /var/cache/apt/*.bin /var/cache/debconf/*-old /var/lib/dpkg/*-old \
+           /var/log/apt /var/log/dpkg.log
+COPY --from=build /out/distband-server /out/distband-health /usr/local/bin/
 # Fail the image build if the runtime package list misses a library the binaries load.
-RUN if ldd /usr/local/bin/distband-server /usr/local/bin/distband | grep "not found"; then exit 1; fi
+RUN if ldd /usr/local/bin/distband-server /usr/local/bin/distband-health | grep "not found"; then exit 1; fi \
+ && distband-server --version && distband-health --help >/dev/null
 # A fixed numeric uid/gid so Kubernetes' runAsNonRoot can verify it without reading /etc/passwd.
 RUN groupadd --system --gid 10001 distband \
  && useradd --system --uid 10001 --gid 10001 --no-create-home --home-dir /nonexistent \
             --shell /usr/sbin/nologin distband
 USER 10001:10001
 EXPOSE 50051
-# distband-server exits 0 on SIGTERM after draining running streams for --grace-seconds.
+# The gRPC health service on the default port (change it here too if you change --listen's port). Kubernetes
+# ignores HEALTHCHECK and probes grpc.health.v1 natively (deploy/k8s); podman keeps it only in docker-format
+# images (scripts/container builds with --format docker).
+HEALTHCHECK --interval=15s --timeout=5s --start-period=10s --retries=3 \
+  CMD ["distband-health", "--server", "127.0.0.1:50051", "--timeout", "4"]
+# distband-server exits 0 on SIGTERM after draining running streams for --grace-seconds (it handles the signal
+# itself, also as PID 1).
 STOPSIGNAL SIGTERM
 ENTRYPOINT ["distband-server"]
 CMD ["--listen", "0.0.0.0:50051"]

@@ -9,7 +9,9 @@
 #include <numeric>
 
 #include <fmt/format.h>
+#include <tbb/parallel_sort.h>
 
+#include "core/interruptible.h"
 #include "core/mesh/mesh_reader.h"
 
 namespace distband {
@@ -50,10 +52,13 @@ std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupt
   // first of its run. Welded ids follow first use below, so the order of the input decides the output.
   std::vector<uint32_t> order(nv), remap(nv);
   std::iota(order.begin(), order.end(), 0u);
-  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-    const auto pa = positionBits(mesh->vertices[a]), pb = positionBits(mesh->vertices[b]);
-    return pa != pb ? pa < pb : a < b;
+  const bool sorted = runInterruptible(interrupter, [&] {
+    tbb::parallel_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+      const auto pa = positionBits(mesh->vertices[a]), pb = positionBits(mesh->vertices[b]);
+      return pa != pb ? pa < pb : a < b;
+    });
   });
+  if (!sorted) return "interrupted";
   for (size_t i = 0; i < nv;) {
     size_t j = i;
     const auto key = positionBits(mesh->vertices[order[i]]);
@@ -104,7 +109,7 @@ std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupt
       const uint64_t a = t[e], b = t[(e + 1) % 3];
       edges.push_back(std::min(a, b) << 32 | std::max(a, b));
     }
-  std::sort(edges.begin(), edges.end());
+  if (!runInterruptible(interrupter, [&] { tbb::parallel_sort(edges.begin(), edges.end()); })) return "interrupted";
   for (size_t i = 0; i < edges.size();) {
     size_t j = i;
     while (j < edges.size() && edges[j] == edges[i]) ++j;

@@ -482,6 +482,10 @@ TEST(HardeningTest, HostileMeshHeadersAreRejectedQuicklyNamingTheElement) {
       {"binary PLY face list of 2^31-1 indices", v1::MESH_FORMAT_PLY, ply_list, "face"},
       {"OFF counts split over lines", v1::MESH_FORMAT_OFF, "OFF\n100000000\n100000000 0\n0 0 0\n", ""},
       {"truncated binary STL", v1::MESH_FORMAT_STL, std::string(80, ' ') + std::string("\xff\xff\xff\x0f", 4), ""},
+      {"truncated ascii PLY", v1::MESH_FORMAT_PLY,
+       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n",
+       "PLY element 'face' 0 (line"},
   };
   for (const Case& c : cases) {
     const auto t0 = Clock::now();
@@ -495,6 +499,74 @@ TEST(HardeningTest, HostileMeshHeadersAreRejectedQuicklyNamingTheElement) {
     EXPECT_LT(ms(Clock::now() - t0), 500) << c.what;
   }
   EXPECT_EQ(ts.server().service().budget().used(), 0u);
+}
+
+}  // namespace
+}  // namespace distband
+
+namespace distband {
+namespace {
+
+std::set<std::string> filesIn(const fs::path& dir) {
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir)) names.insert(e.path().filename().string());
+  return names;
+}
+
+TEST(HardeningTest, UploadsNeverWriteFiles) {
+  const fs::path tmp = fs::temp_directory_path();
+  TestServer ts;
+  const auto before = filesIn(tmp);
+  v1::UploadReply up;
+  const std::string bunny = readAll(DISTBAND_TEST_DATA_DIR "/meshes/bunny.obj");
+  ASSERT_TRUE(ts.client().uploadMesh(bunny, v1::MESH_FORMAT_OBJ, "bunny.obj", &up).ok());
+  EXPECT_FALSE(ts.client().uploadMesh("ply\nformat ascii 1.0\n", v1::MESH_FORMAT_PLY, "bad.ply", &up).ok());
+  for (const std::string& f : filesIn(tmp))
+    EXPECT_TRUE(before.count(f)) << "the server created " << (tmp / f).string();
+}
+
+TEST(HardeningTest, ACancelledUploadStopsItsParseAndFreesItsMemory) {
+  TestServer ts;
+  // A 60 MB OBJ: parsing it takes far longer than the cancel below.
+  std::string obj;
+  obj.reserve(60 << 20);
+  for (int i = 0; obj.size() < (60u << 20); ++i)
+    obj += "v " + std::to_string(i % 1000) + " " + std::to_string(i / 1000 % 1000) + " " + std::to_string(i / 1000000) + "\n";
+  obj += "f 1 2 3\n";
+  QueryCanceller unused;
+  std::atomic<bool> done{false};
+  grpc::Status status;
+  auto channel = grpc::CreateChannel(ts.target(), grpc::InsecureChannelCredentials());
+  auto stub = v1::DistanceField::NewStub(channel);
+  grpc::ClientContext ctx;
+  std::thread upload([&] {
+    v1::UploadReply reply;
+    auto writer = stub->UploadMesh(&ctx, &reply);
+    for (size_t off = 0; off < obj.size(); off += 4 << 20) {
+      v1::UploadMeshChunk chunk;
+      if (off == 0) chunk.mutable_header()->set_format(v1::MESH_FORMAT_OBJ);
+      chunk.set_data(obj.substr(off, 4 << 20));
+      if (!writer->Write(chunk)) break;
+    }
+    writer->WritesDone();
+    status = writer->Finish();
+    done = true;
+  });
+  // Wait until the server is parsing (all bytes received: the upload's buffer is reserved), then cancel.
+  const auto deadline = Clock::now() + std::chrono::seconds(20);
+  while (ts.server().service().budget().used() < obj.size() && Clock::now() < deadline && !done)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const auto t0 = Clock::now();
+  ctx.TryCancel();
+  while (ts.server().service().activeCalls() > 0 && Clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  const double stop_ms = ms(Clock::now() - t0);
+  upload.join();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::CANCELLED);
+  EXPECT_EQ(ts.server().service().budget().used(), 0u);
+  EXPECT_LT(stop_ms, 1000) << "a generous bound (bench/cancel_bench measures the latency)";
+  std::printf("upload parse stopped %.1f ms after the client's cancel\n", stop_ms);
 }
 
 }  // namespace
