@@ -552,9 +552,9 @@ TEST(HardeningTest, ACancelledUploadStopsItsParseAndFreesItsMemory) {
     status = writer->Finish();
     done = true;
   });
-  // Wait until the server is parsing (all bytes received: the upload's buffer is reserved), then cancel.
+  // Wait until the server is parsing (its parse reservation, 24 x the upload, is in the budget), then cancel.
   const auto deadline = Clock::now() + std::chrono::seconds(20);
-  while (ts.server().service().budget().used() < obj.size() && Clock::now() < deadline && !done)
+  while (ts.server().service().budget().used() < 20 * obj.size() && Clock::now() < deadline && !done)
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
   std::this_thread::sleep_for(std::chrono::milliseconds(20));
   const auto t0 = Clock::now();
