@@ -19,6 +19,7 @@
 
 #include "client/remote_client.h"
 #include "tests/integration/service_fixture.h"
+#include "server/request_validation.h"
 #include "tests/support/child_server.h"
 
 namespace distband {
@@ -151,6 +152,56 @@ TEST(ServerProcessTest, GraceExpiryCancelsStalledCallsAndExitsZero) {
   EXPECT_LT(took, 1500);
   // A call blocked on its client can only be ended by cancelling it.
   EXPECT_EQ(held.status.error_code(), grpc::StatusCode::CANCELLED) << held.status.error_message();
+}
+
+}  // namespace
+}  // namespace distband
+
+namespace distband {
+namespace {
+
+TEST(ServerProcessTest, ConcurrentMaximalQueriesStayWithinTheMemoryBudget) {
+  ServerProcess server({"--threads", "2", "--max-queries", "4", "--memory-budget", "512M", "--queue-wait-ms", "500"});
+  ASSERT_GT(server.port(), 0) << server.log();
+  RemoteClient client(server.target());
+  v1::ServerInfo info;
+  ASSERT_TRUE(client.info(&info).ok());
+  // The largest cube the budget admits on its own, then 24 clients asking for it at once.
+  int n = 64;
+  while (n < 512) {
+    ServerOptions o;
+    AssetCache cache(1 << 20);
+    ResolvedQuery q;
+    ASSERT_TRUE(resolveQuery(pointsRequest({{1, 2, 3}}, {n + 16, n + 16, n + 16}, 1.0, 0, 0), o, cache, nullptr, &q).ok());
+    if (q.memory.total() + o.stream_buffer_bytes > info.memory_budget_bytes()) break;
+    n += 16;
+  }
+  std::atomic<int64_t> peak_kb{0};
+  std::atomic<bool> sampling{true};
+  std::thread sampler([&] {
+    while (sampling) {
+      peak_kb = std::max<int64_t>(peak_kb, server.status("VmRSS:"));
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+  });
+  std::vector<std::thread> clients;
+  std::atomic<int> ok{0}, exhausted{0};
+  for (int c = 0; c < 24; ++c)
+    clients.emplace_back([&, c] {
+      RemoteClient own(server.target());
+      Streamed s = stream(own, pointsRequest({{double(c), 5, 7}}, {n, n, n}, 1.0, 0, 0), 0);
+      if (s.result.status.ok()) ++ok;
+      if (s.result.status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) ++exhausted;
+    });
+  for (auto& t : clients) t.join();
+  sampling = false;
+  sampler.join();
+  const double budget = 512.0 * 1024 * 1024;
+  std::printf("%d^3 queries: %d ok, %d refused; server peak RSS %.0f MiB = %.2f x the 512 MiB budget\n", n, ok.load(),
+              exhausted.load(), peak_kb / 1024.0, peak_kb * 1024.0 / budget);
+  EXPECT_GE(ok.load(), 1);
+  EXPECT_EQ(ok.load() + exhausted.load(), 24);
+  EXPECT_LE(peak_kb * 1024.0, 1.1 * budget);
 }
 
 }  // namespace
