@@ -220,7 +220,7 @@ int main(int argc, char** argv) {
     for (Case& c : cases) {
       const bool is_mesh = c.request.has_asset_id();
       std::vector<double> inproc, stream, first;
-      FieldSum ref, got;
+      FieldSum ref;
       double mb = 0;
       bool equal = true;
       for (int i = 0; i < repeat; ++i) {
