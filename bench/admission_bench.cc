@@ -29,6 +29,7 @@
 #include "server/memory_budget.h"
 #include "server/query_job.h"
 #include "server/request_validation.h"
+#include "tests/support/query_requests.h"
 
 #ifndef DISTBAND_BENCH_DIR
 #define DISTBAND_BENCH_DIR "bench"
@@ -57,17 +58,7 @@ std::string readFile(const std::string& path) {
 }
 
 v1::QueryRequest points(std::vector<Vec3d> pts, int n, double limit) {
-  v1::QueryRequest r;
-  for (const Vec3d& p : pts) {
-    v1::Vec3* v = r.mutable_points()->add_points();
-    v->set_x(p.x), v->set_y(p.y), v->set_z(p.z);
-  }
-  r.mutable_grid()->set_voxel_size(1);
-  r.mutable_grid()->mutable_dims()->set_x(uint32_t(n));
-  r.mutable_grid()->mutable_dims()->set_y(uint32_t(n));
-  r.mutable_grid()->mutable_dims()->set_z(uint32_t(n));
-  r.set_limit(limit);
-  return r;
+  return pointsRequest(pts, {n, n, n}, 1.0, 0, limit);
 }
 
 v1::QueryRequest volume(const std::vector<uint8_t>& mask, int n, bool signed_field, double limit) {

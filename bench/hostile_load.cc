@@ -39,6 +39,7 @@
 #include "server/request_validation.h"
 #include "server/seed_builder.h"
 #include "tests/support/child_server.h"
+#include "tests/support/query_requests.h"
 
 #ifndef DISTBAND_BENCH_DIR
 #define DISTBAND_BENCH_DIR "bench"
@@ -51,18 +52,7 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 v1::QueryRequest pointQuery(int n, std::vector<Vec3d> points, double limit) {
-  v1::QueryRequest r;
-  for (const Vec3d& p : points) {
-    v1::Vec3* v = r.mutable_points()->add_points();
-    v->set_x(p.x), v->set_y(p.y), v->set_z(p.z);
-  }
-  r.mutable_grid()->set_voxel_size(1);
-  r.mutable_grid()->mutable_dims()->set_x(uint32_t(n));
-  r.mutable_grid()->mutable_dims()->set_y(uint32_t(n));
-  r.mutable_grid()->mutable_dims()->set_z(uint32_t(n));
-  r.set_limit(limit);
-  r.set_segment_length(n / 4.0);
-  return r;
+  return pointsRequest(points, {n, n, n}, 1.0, n / 4.0, limit);
 }
 
 /// The field the server must stream for `request`, computed in this process the way the server does.

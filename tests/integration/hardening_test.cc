@@ -141,6 +141,10 @@ TEST(HardeningTest, TlsServesOnlyTlsClients) {
   untrusting.tls = true;
   untrusting.tls_root_ca_pem = "-----BEGIN CERTIFICATE-----\nMA==\n-----END CERTIFICATE-----\n";
   EXPECT_FALSE(RemoteClient(ts.target(), untrusting).info(&info, std::chrono::seconds(2)).ok());
+  // The container's health probe speaks TLS when told to, and fails without it.
+  const std::string probe = std::string(DISTBAND_HEALTH_BINARY) + " --timeout 2 --server " + ts.target();
+  EXPECT_EQ(std::system((probe + " --tls-ca " + dir.path("server.pem") + " >/dev/null 2>&1").c_str()), 0);
+  EXPECT_NE(std::system((probe + " >/dev/null 2>&1").c_str()), 0);
 }
 
 TEST(HardeningTest, MutualTlsRequiresAClientCertificate) {

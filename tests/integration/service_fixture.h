@@ -16,6 +16,7 @@
 #include "client/remote_client.h"
 #include "core/dense_field.h"
 #include "server/server.h"
+#include "tests/support/query_requests.h"
 
 namespace distband {
 
@@ -67,24 +68,6 @@ class TestServer {
   std::mutex mu_;
   std::vector<QueryRecord> records_;
 };
-
-inline v1::QueryRequest pointsRequest(const std::vector<Vec3d>& points, Coord dims, double h, double segment,
-                               double limit) {
-  v1::QueryRequest r;
-  for (const Vec3d& p : points) {
-    v1::Vec3* v = r.mutable_points()->add_points();
-    v->set_x(p.x);
-    v->set_y(p.y);
-    v->set_z(p.z);
-  }
-  r.mutable_grid()->set_voxel_size(h);
-  r.mutable_grid()->mutable_dims()->set_x(uint32_t(dims.x));
-  r.mutable_grid()->mutable_dims()->set_y(uint32_t(dims.y));
-  r.mutable_grid()->mutable_dims()->set_z(uint32_t(dims.z));
-  r.set_segment_length(segment);
-  r.set_limit(limit);
-  return r;
-}
 
 /// Everything a query delivered, assembled into a dense field, plus the order checks.
 struct Streamed {
