@@ -263,12 +263,28 @@ class BandRun {
     return link_tables_[(cls(local.z) * 9 + cls(local.y) * 3 + cls(local.x)) * 32 + dir];
   }
 
-  /// Whether the run must stop. Cheap (a relaxed load, and a clock read with a deadline): parallel loops call it once
-  /// per range, whose grain keeps a range well under a millisecond of work.
+  /// Whether the run must stop. Cheap (a relaxed load, and a clock read with a deadline).
   bool stopping() const {
     if (stopped_.load(std::memory_order_relaxed)) return true;
     if (!isInterrupted(opt_.interrupter)) return false;
     stopped_.store(true, std::memory_order_relaxed);
+    return true;
+  }
+  /// stopping(), polled at item i of a parallel range every `every` items (a power of two). A poll per range is not
+  /// enough: TBB's auto_partitioner hands out ranges of up to 1/(4 x threads) of a loop, which at 1024^3 is a few
+  /// hundred milliseconds of work. `every` keeps a poll interval near 0.1 ms of the loop's work per item.
+  bool stoppingAt(size_t i, size_t every) const { return (i & (every - 1)) == 0 && stopping(); }
+  /// Appends `from` to `to` in slices of 256 Ki entries with a poll between them; false when the run must stop.
+  /// The copy first-touches fresh pages on one thread, ~3 ms a MiB on some virtual machines, and a front at 1024^3
+  /// is tens of MB.
+  template <typename List>
+  bool appendPolled(List& to, const List& from) const {
+    constexpr size_t kSlice = size_t(256) << 10;
+    to.reserve(to.size() + from.size());
+    for (size_t i = 0; i < from.size(); i += kSlice) {
+      if (stopping()) return false;
+      to.insert(to.end(), from.begin() + i, from.begin() + std::min(from.size(), i + kSlice));
+    }
     return true;
   }
 
@@ -550,9 +566,9 @@ void BandRun::insertBand() {
   }
   step_ = 0;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-    if (stopping()) return;
     ThreadBuffers& tb = buffers_.local();
     for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (stoppingAt(i, 1024)) return;
       const BandVoxel& v = band[i];
       const uint32_t site = toKeySite(v.site);
       const float d2 = metric_.key2(site, v.voxel.x, v.voxel.y, v.voxel.z);
@@ -575,9 +591,9 @@ void BandRun::insertBand() {
 void BandRun::stepFromBand() {
   const auto& band = seeds_.band;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
-    if (stopping()) return;
     ThreadBuffers& tb = buffers_.local();
     for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (stoppingAt(i, 256)) return;
       const BandVoxel& v = band[i];
       if (v.site == kNoSite) continue;
       const uint32_t bi = brickIndex(v.voxel.x, v.voxel.y, v.voxel.z);
@@ -591,9 +607,11 @@ void BandRun::stepFromBand() {
 
 void BandRun::step(FrontList& front) {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
-    if (stopping()) return;
     ThreadBuffers& tb = buffers_.local();
-    for (size_t i = r.begin(); i != r.end(); ++i) pushFrom(front[i], tb);
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (stoppingAt(i, 256)) return;
+      pushFrom(front[i], tb);
+    }
   });
 }
 
@@ -630,8 +648,10 @@ void BandRun::scanAndCheck() {
   };
   std::vector<uint32_t> uniform(n);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
-    if (stopping()) return;
-    for (size_t i = r.begin(); i != r.end(); ++i) uniform[i] = uniformSite(table_[pending_bricks_[i]].load(std::memory_order_relaxed));
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (stoppingAt(i, 64)) return;
+      uniform[i] = uniformSite(table_[pending_bricks_[i]].load(std::memory_order_relaxed));
+    }
   });
   if (stopping()) return;
   // Of any brick by index: pending bricks from the table above, the others (all delivered) scanned on demand.
@@ -642,10 +662,10 @@ void BandRun::scanAndCheck() {
     return b ? uniformSite(b) : kEmpty;
   };
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
-    if (stopping()) return;
     ThreadBuffers& tb = buffers_.local();
     uint64_t block[125];
     for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (stoppingAt(i, 4)) return;
       const uint32_t bi = pending_bricks_[i];
       BrickState* b = table_[bi].load(std::memory_order_relaxed);
       const Coord bc{b->origin.x >> kBrickLog2, b->origin.y >> kBrickLog2, b->origin.z >> kBrickLog2};
@@ -733,8 +753,8 @@ FrontList BandRun::correct(bool first_round) {
     // Visits the touched voxels within distance 2 of every changed voxel (each changed voxel once).
     auto aroundDirty = [&](auto&& visit) {
       tbb::parallel_for(tbb::blocked_range<size_t>(0, dirty.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
-        if (stopping()) return;
         for (size_t i = r.begin(); i != r.end(); ++i) {
+          if (stoppingAt(i, 16)) return;
           const BrickState* db = table_[dirty[i].brick].load(std::memory_order_relaxed);
           const Coord c = db->origin + brickLocal(dirty[i].offset);
           for (int dz = -2; dz <= 2; ++dz)
@@ -867,8 +887,8 @@ void BandRun::collectPending() {
 // Voxels admitted beyond the previous threshold but not yet delivered start the new segment's lifespan clock.
 void BandRun::rearmLifespans() {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pending_bricks_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
-    if (stopping()) return;
     for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (stoppingAt(i, 64)) return;
       BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
       for (int off = 0; off < kBrickVoxels; ++off) {
         const uint64_t k = b->key[off].load(std::memory_order_relaxed);
@@ -893,8 +913,8 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
   std::vector<uint32_t> slot(n, 0);  // 1 + position in the segment's output, or 0
   std::vector<uint8_t> keep(n, 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
-    if (stopping()) return;
     for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (stoppingAt(i, 64)) return;
       BrickState* b = table_[pending_bricks_[i]].load(std::memory_order_relaxed);
       for (int off = 0; off < kBrickVoxels && !(slot[i] && keep[i]); ++off) {
         const uint64_t k = b->key[off].load(std::memory_order_relaxed);
@@ -1014,11 +1034,12 @@ EngineResult BandRun::run() {
   };
   auto gatherFront = [&]() {
     FrontList front;
+    if (stopping()) return front;  // the run ends: no need to copy the partial buffers
     size_t n = 0;
     for (auto& tb : buffers_) n += tb.next.size();
     front.reserve(n);
     for (auto& tb : buffers_) {
-      front.insert(front.end(), tb.next.begin(), tb.next.end());
+      if (!appendPolled(front, tb.next)) return FrontList();
       // A large buffer is given back rather than kept for the next step: the initial band's front can be tens of
       // MB, and later fronts are mostly much smaller (regrowing costs little next to the pushes that fill it).
       if (tb.next.capacity() > 65536) FrontList().swap(tb.next);
@@ -1031,6 +1052,7 @@ EngineResult BandRun::run() {
     // Snapshot each changed voxel's site as of the end of the step: the next step offers exactly these.
     tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i != r.end(); ++i) {
+        if (stoppingAt(i, 4096)) return;
         BrickState* b = table_[front[i].brick].load(std::memory_order_relaxed);
         const uint64_t k = b->key[front[i].offset].load(std::memory_order_relaxed);
         b->listed.clear(front[i].offset);
@@ -1044,7 +1066,7 @@ EngineResult BandRun::run() {
   // Held-back offers (this step's and earlier ones), deduplicated, as the next front.
   auto takeDeferred = [&]() {
     for (auto& tb : buffers_) {
-      deferred_.insert(deferred_.end(), tb.deferred.begin(), tb.deferred.end());
+      if (!appendPolled(deferred_, tb.deferred)) return FrontList();
       tb.deferred.clear();
     }
     auto order = [](const FrontEntry& a, const FrontEntry& b) {
@@ -1144,8 +1166,12 @@ EngineResult BandRun::run() {
     }
     if (result.interrupted) break;
     for (auto& tb : buffers_) {
-      deferred_.insert(deferred_.end(), tb.deferred.begin(), tb.deferred.end());
+      if (!appendPolled(deferred_, tb.deferred)) break;
       tb.deferred.clear();
+    }
+    if (stopping()) {
+      result.interrupted = true;
+      break;
     }
     stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
     const bool last = emitSegment(seg, lower, upper, deferred_.empty(), stats);
@@ -1179,8 +1205,12 @@ EngineResult runEngine(const Grid& grid, const Seeds& seeds, const EngineOptions
     throw std::invalid_argument("seeds.region must hold one label per grid voxel");
   EngineResult result;
   auto body = [&] {
-    BandRun run(grid, seeds, options, on_segment, owned_band);
-    result = run.run();
+    std::optional<BandRun> run;
+    run.emplace(grid, seeds, options, on_segment, owned_band);
+    result = run->run();
+    const auto t0 = std::chrono::steady_clock::now();
+    run.reset();
+    result.release_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
   if (options.threads > 0) {
     tbb::task_arena arena(options.threads);

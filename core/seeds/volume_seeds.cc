@@ -1,11 +1,30 @@
 #include "core/seeds/volume_seeds.h"
 
+#include <algorithm>
+#include <atomic>
+#include <iterator>
 #include <memory>
 
 #include <fmt/format.h>
+#include <tbb/parallel_for.h>
 
 namespace distband {
+namespace {
 
+// What one z-slice contributes, found independently of the other slices (in parallel): its boundary voxels in scan
+// order (their linear indices, for the neighbour lookups of the signed case, and their positions: the sites), and
+// its band. Site ids are numbered slice after slice in scan order, so the result does not depend on threads.
+struct Slice {
+  std::vector<int64_t> boundary;
+  std::vector<BandVoxel> band;  // unsigned: sites numbered within the slice, made global on concatenation
+  int64_t inside = 0;
+};
+
+}  // namespace
+
+// Nothing here allocates per grid voxel beyond the signed case's region (1 byte a voxel, which the engine needs): a
+// dense table of site ids (4 bytes a voxel, 4 GiB at 1024^3) used to stand here, and filling it, one thread
+// first-touching every page, took seconds that a cancel could not interrupt.
 std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out,
                             const Interrupter* interrupter) {
   if (static_cast<int64_t>(mask.size()) != grid.voxelCount())
@@ -20,61 +39,104 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
            (y > 0 && inside(i - sy) != in) || (y + 1 < d.y && inside(i + sy) != in) ||
            (z > 0 && inside(i - sz) != in) || (z + 1 < d.z && inside(i + sz) != in);
   };
-  Seeds seeds;
-  seeds.kind = SiteKind::kPoint;
-  int64_t n_inside = 0;
-  // Site ids of boundary voxels, so a neighbour across the boundary can name it.
-  std::vector<uint32_t> site_of;
-  if (signed_distance) site_of.assign(mask.size(), kNoSite);
-  for (int z = 0; z < d.z; ++z) {
-    if (isInterrupted(interrupter)) return "interrupted";
+  std::vector<Slice> slices(size_t(d.z));
+  std::atomic<bool> stopped{false};
+  auto stop = [&] {
+    if (stopped.load(std::memory_order_relaxed)) return true;
+    if (!isInterrupted(interrupter)) return false;
+    stopped.store(true, std::memory_order_relaxed);
+    return true;
+  };
+  // 1. Boundary voxels (the sites) and, unsigned, the band: every mask voxel, the boundary ones with their site.
+  tbb::parallel_for(0, d.z, [&](int z) {
+    if (stop()) return;
+    Slice& s = slices[size_t(z)];
     for (int y = 0; y < d.y; ++y)
       for (int x = 0; x < d.x; ++x) {
         const int64_t i = (int64_t(z) * d.y + y) * d.x + x;
-        n_inside += inside(i);
-        if (!signed_distance) {
-          if (!inside(i)) continue;
-          uint32_t site = kNoSite;
-          if (onBoundary(x, y, z, i)) {
-            site = static_cast<uint32_t>(seeds.points.size());
-            seeds.points.push_back({double(x), double(y), double(z)});
-          }
-          seeds.band.push_back({{x, y, z}, site});
-        } else if (onBoundary(x, y, z, i)) {
-          site_of[i] = static_cast<uint32_t>(seeds.points.size());
-          seeds.points.push_back({double(x), double(y), double(z)});
-        }
+        s.inside += inside(i);
+        if (!signed_distance && !inside(i)) continue;
+        const bool boundary = onBoundary(x, y, z, i);
+        if (boundary) s.boundary.push_back(i);
+        if (!signed_distance) s.band.push_back({{x, y, z}, boundary ? uint32_t(s.boundary.size() - 1) : kNoSite});
       }
+  });
+  if (stop()) return "interrupted";
+  std::vector<uint32_t> first_site(slices.size() + 1, 0);
+  int64_t n_inside = 0;
+  for (size_t z = 0; z < slices.size(); ++z) {
+    n_inside += slices[z].inside;
+    const uint64_t next = uint64_t(first_site[z]) + slices[z].boundary.size();
+    if (next >= kNoSite) return fmt::format("the seed mask has more than {} boundary voxels", kNoSite - 1);
+    first_site[z + 1] = uint32_t(next);
   }
   if (n_inside == 0) return "the seed mask has no nonzero voxel";
+  if (signed_distance && n_inside == grid.voxelCount())
+    return "the seed mask has no zero voxel, so a signed field is undefined";
+
   if (signed_distance) {
-    if (n_inside == grid.voxelCount()) return "the seed mask has no zero voxel, so a signed field is undefined";
-    // Each boundary voxel starts with the nearest voxel across the boundary (a 6-neighbour, distance 1):
-    // the lowest site id among them, so the choice does not depend on scan order.
-    for (int z = 0; z < d.z; ++z) {
-      if (isInterrupted(interrupter)) return "interrupted";
-      for (int y = 0; y < d.y; ++y)
-        for (int x = 0; x < d.x; ++x) {
-          const int64_t i = (int64_t(z) * d.y + y) * d.x + x;
-          if (site_of[i] == kNoSite) continue;
-          const bool in = inside(i);
-          uint32_t best = kNoSite;
-          auto consider = [&](bool ok, int64_t j) {
-            if (ok && inside(j) != in && site_of[j] < best) best = site_of[j];
-          };
-          consider(x > 0, i - 1);
-          consider(x + 1 < d.x, i + 1);
-          consider(y > 0, i - sy);
-          consider(y + 1 < d.y, i + sy);
-          consider(z > 0, i - sz);
-          consider(z + 1 < d.z, i + sz);
-          seeds.band.push_back({{x, y, z}, best});
-        }
+    // 2. Each boundary voxel starts with the nearest voxel across the boundary (a 6-neighbour, distance 1): the
+    // lowest site id among them, so the choice does not depend on scan order.
+    auto siteOf = [&](int64_t j) {  // j is a boundary voxel: its site id
+      const int zj = int(j / sz);
+      const auto& b = slices[size_t(zj)].boundary;
+      return first_site[size_t(zj)] + uint32_t(std::lower_bound(b.begin(), b.end(), j) - b.begin());
+    };
+    tbb::parallel_for(0, d.z, [&](int z) {
+      if (stop()) return;
+      Slice& s = slices[size_t(z)];
+      s.band.reserve(s.boundary.size());
+      for (const int64_t i : s.boundary) {
+        const int x = int(i % sy), y = int((i / sy) % d.y);
+        const bool in = inside(i);
+        uint32_t best = kNoSite;
+        // A 6-neighbour on the other side is itself on the boundary, so it has a site.
+        auto consider = [&](bool ok, int64_t j) {
+          if (ok && inside(j) != in) best = std::min(best, siteOf(j));
+        };
+        consider(x > 0, i - 1);
+        consider(x + 1 < d.x, i + 1);
+        consider(y > 0, i - sy);
+        consider(y + 1 < d.y, i + sy);
+        consider(z > 0, i - sz);
+        consider(z + 1 < d.z, i + sz);
+        s.band.push_back({{x, y, z}, best});
+      }
+    });
+    if (stop()) return "interrupted";
+  }
+
+  // 3. Concatenate, slice by slice with a poll between slices (the copies first-touch fresh memory on one thread),
+  // freeing each slice as it is taken.
+  Seeds seeds;
+  seeds.kind = SiteKind::kPoint;
+  size_t band_total = 0;
+  for (const Slice& s : slices) band_total += s.band.size();
+  seeds.points.reserve(first_site.back());
+  seeds.band.reserve(band_total);
+  for (size_t z = 0; z < slices.size(); ++z) {
+    if (stop()) return "interrupted";
+    Slice& s = slices[z];
+    for (const int64_t i : s.boundary) seeds.points.push_back({double(i % sy), double((i / sy) % d.y), double(z)});
+    for (BandVoxel v : s.band) {
+      if (!signed_distance && v.site != kNoSite) v.site += first_site[z];
+      seeds.band.push_back(v);
     }
-    auto region = std::make_shared<std::vector<uint8_t>>(mask.size());
-    for (size_t i = 0; i < mask.size(); ++i) {
-      if (i % (size_t(1) << 22) == 0 && isInterrupted(interrupter)) return "interrupted";
-      (*region)[i] = mask[i] != 0;
+    std::vector<int64_t>().swap(s.boundary);
+    std::vector<BandVoxel>().swap(s.band);
+  }
+
+  if (signed_distance) {
+    // Which side each voxel is on, 0/1 (the engine keeps each side's distances to its own sites). Copied in 4 MiB
+    // steps with a poll between them, for the same reason as above.
+    auto region = std::make_shared<std::vector<uint8_t>>();
+    region->reserve(mask.size());
+    constexpr size_t kStep = size_t(4) << 20;
+    for (size_t i = 0; i < mask.size(); i += kStep) {
+      if (stop()) return "interrupted";
+      const size_t end = std::min(mask.size(), i + kStep);
+      std::transform(mask.begin() + int64_t(i), mask.begin() + int64_t(end), std::back_inserter(*region),
+                     [](uint8_t m) { return uint8_t(m != 0); });
     }
     seeds.region = region;
     const Grid g = grid;
