@@ -699,16 +699,21 @@ TEST(EngineControl, ChunkedEmissionDeliversTheSameBricksInTheSameOrder) {
         EXPECT_EQ(whole.bricks[i].second.origin, chunked.bricks[i].second.origin) << c.name << " brick " << i;
         EXPECT_EQ(std::memcmp(&whole.bricks[i].second.mask, &chunked.bricks[i].second.mask, sizeof(BrickMask)), 0);
         for (int v = 0; v < kBrickVoxels; ++v)
-          if (whole.bricks[i].second.mask.test(v))
+          if (whole.bricks[i].second.mask.test(v)) {
             ASSERT_EQ(whole.bricks[i].second.values[v], chunked.bricks[i].second.values[v]) << c.name;
+          }
       }
       EXPECT_LE(chunked.largest_call, 7u) << c.name;
       // Every segment ends with exactly one complete chunk, and segments come in order.
       int complete = 0;
       for (size_t i = 0; i < chunked.calls.size(); ++i) {
         complete += chunked.calls[i].second;
-        if (i > 0) EXPECT_GE(chunked.calls[i].first, chunked.calls[i - 1].first);
-        if (i > 0 && chunked.calls[i].first != chunked.calls[i - 1].first) EXPECT_TRUE(chunked.calls[i - 1].second);
+        if (i > 0) {
+          EXPECT_GE(chunked.calls[i].first, chunked.calls[i - 1].first);
+        }
+        if (i > 0 && chunked.calls[i].first != chunked.calls[i - 1].first) {
+          EXPECT_TRUE(chunked.calls[i - 1].second);
+        }
       }
       EXPECT_EQ(complete, int(whole.calls.size())) << c.name;
       EXPECT_TRUE(chunked.calls.back().second);

@@ -522,15 +522,26 @@ std::set<std::string> filesIn(const fs::path& dir) {
 }
 
 TEST(HardeningTest, UploadsNeverWriteFiles) {
-  const fs::path tmp = fs::temp_directory_path();
-  TestServer ts;
-  const auto before = filesIn(tmp);
-  v1::UploadReply up;
-  const std::string bunny = readAll(DISTBAND_TEST_DATA_DIR "/meshes/bunny.obj");
-  ASSERT_TRUE(ts.client().uploadMesh(bunny, v1::MESH_FORMAT_OBJ, "bunny.obj", &up).ok());
-  EXPECT_FALSE(ts.client().uploadMesh("ply\nformat ascii 1.0\n", v1::MESH_FORMAT_PLY, "bad.ply", &up).ok());
-  for (const std::string& f : filesIn(tmp))
-    EXPECT_TRUE(before.count(f)) << "the server created " << (tmp / f).string();
+  // Watched: a private TMPDIR (where temp_directory_path() and mkstemp-style code would write; it must stay
+  // empty) and /tmp itself, where other tests running in parallel create their own distband_* fixtures.
+  const fs::path tmp = "/tmp";
+  TempDir private_tmp;
+  const char* old_tmpdir = std::getenv("TMPDIR");
+  const std::string saved = old_tmpdir ? old_tmpdir : "";
+  ::setenv("TMPDIR", private_tmp.path("").c_str(), 1);
+  {
+    TestServer ts;
+    const auto before = filesIn(tmp);
+    v1::UploadReply up;
+    const std::string bunny = readAll(DISTBAND_TEST_DATA_DIR "/meshes/bunny.obj");
+    ASSERT_TRUE(ts.client().uploadMesh(bunny, v1::MESH_FORMAT_OBJ, "bunny.obj", &up).ok());
+    EXPECT_FALSE(ts.client().uploadMesh("ply\nformat ascii 1.0\n", v1::MESH_FORMAT_PLY, "bad.ply", &up).ok());
+    EXPECT_TRUE(filesIn(private_tmp.path("")).empty()) << "the server wrote into TMPDIR";
+    for (const std::string& f : filesIn(tmp))
+      EXPECT_TRUE(before.count(f) || f.rfind("distband_", 0) == 0) << "the server created " << (tmp / f).string();
+  }
+  if (old_tmpdir) ::setenv("TMPDIR", saved.c_str(), 1);
+  else ::unsetenv("TMPDIR");
 }
 
 TEST(HardeningTest, ACancelledUploadStopsItsParseAndFreesItsMemory) {
