@@ -276,11 +276,10 @@ class BandRun {
   bool stoppingAt(size_t i, size_t every) const { return (i & (every - 1)) == 0 && stopping(); }
   /// Appends `from` to `to` in slices of 256 Ki entries with a poll between them; false when the run must stop.
   /// The copy first-touches fresh pages on one thread, ~3 ms a MiB on some virtual machines, and a front at 1024^3
-  /// is tens of MB.
+  /// is tens of MB. Callers reserve the total first (one allocation for all the threads' lists).
   template <typename List>
   bool appendPolled(List& to, const List& from) const {
     constexpr size_t kSlice = size_t(256) << 10;
-    to.reserve(to.size() + from.size());
     for (size_t i = 0; i < from.size(); i += kSlice) {
       if (stopping()) return false;
       to.insert(to.end(), from.begin() + i, from.begin() + std::min(from.size(), i + kSlice));
@@ -1063,12 +1062,20 @@ EngineResult BandRun::run() {
     return front;
   };
 
-  // Held-back offers (this step's and earlier ones), deduplicated, as the next front.
-  auto takeDeferred = [&]() {
+  // Moves the threads' held-back offers into deferred_; false when the run must stop.
+  auto collectDeferred = [&]() {
+    size_t n = deferred_.size();
+    for (auto& tb : buffers_) n += tb.deferred.size();
+    deferred_.reserve(n);
     for (auto& tb : buffers_) {
-      if (!appendPolled(deferred_, tb.deferred)) return FrontList();
+      if (!appendPolled(deferred_, tb.deferred)) return false;
       tb.deferred.clear();
     }
+    return true;
+  };
+  // Held-back offers (this step's and earlier ones), deduplicated, as the next front.
+  auto takeDeferred = [&]() {
+    if (!collectDeferred()) return FrontList();
     auto order = [](const FrontEntry& a, const FrontEntry& b) {
       return std::tie(a.brick, a.offset, a.site) < std::tie(b.brick, b.offset, b.site);
     };
@@ -1165,10 +1172,7 @@ EngineResult BandRun::run() {
       front = gatherFront();
     }
     if (result.interrupted) break;
-    for (auto& tb : buffers_) {
-      if (!appendPolled(deferred_, tb.deferred)) break;
-      tb.deferred.clear();
-    }
+    collectDeferred();  // false only when the run stops, which the next line sees
     if (stopping()) {
       result.interrupted = true;
       break;
