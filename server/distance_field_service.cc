@@ -47,14 +47,6 @@ std::unique_ptr<tbb::task_arena> makeArena(const ServerOptions& o) {
   return std::make_unique<tbb::task_arena>(q + o.resolvedComputeThreads() - 1, unsigned(q));
 }
 
-/// A compute slot held for the lifetime of the work it admitted.
-struct SlotHold {
-  QuerySlots* slots = nullptr;
-  ~SlotHold() {
-    if (slots) slots->release();
-  }
-};
-
 }  // namespace
 
 MemoryPlan MemoryPlan::of(const ServerOptions& o) {
@@ -92,8 +84,7 @@ Status DistanceFieldService::admitCall(grpc::ServerContext* context, const char*
 
 Status DistanceFieldService::admitWork(grpc::ServerContext* context, ActiveCalls::Call& call, uint64_t bytes,
                                        const std::string& what, MemoryBudget::Reservation* reservation,
-                                       bool* have_slot) {
-  *have_slot = false;
+                                       ComputeSlot* slot) {
   const auto t0 = Clock::now();
   auto abandon = [&] { return context->IsCancelled() || call.interrupter().interrupted() || shutting_down_.load(); };
   const auto wait = std::chrono::milliseconds(options_.queue_wait_ms);
@@ -112,7 +103,7 @@ Status DistanceFieldService::admitWork(grpc::ServerContext* context, ActiveCalls
         fmt::format("{}: all {} compute slots (--max-queries, concurrent computations) stayed busy for {} ms; retry later", what,
                     options_.max_concurrent_queries, options_.queue_wait_ms));
   }
-  *have_slot = true;
+  slot->slots = &slots_;
   return Status::Ok();
 }
 
@@ -205,20 +196,22 @@ Status DistanceFieldService::readUpload(grpc::ServerContext* context, grpc::Serv
   return Status::Ok();
 }
 
+Status DistanceFieldService::computeAdmitted(grpc::ServerContext* context, ActiveCalls::Call& call, uint64_t bytes,
+                                             const std::string& what, const std::function<Status()>& work) {
+  MemoryBudget::Reservation memory;
+  ComputeSlot slot;
+  if (Status s = admitWork(context, call, bytes, what, &memory, &slot); !s.ok()) return s;
+  return runCompute(context, call, work);
+}
+
 Status DistanceFieldService::parseMeshAdmitted(grpc::ServerContext* context, ActiveCalls::Call& call,
                                                std::string_view bytes, v1::MeshFormat format, const std::string& name,
                                                std::string_view field, std::shared_ptr<const Asset>* asset) {
-  MemoryBudget::Reservation parse_memory;
-  bool have_slot = false;
-  if (Status s = admitWork(context, call, meshParsePeakBytes(bytes.size()),
-                           fmt::format("parsing the mesh ({} bytes)", bytes.size()), &parse_memory, &have_slot);
-      !s.ok())
-    return s;
-  SlotHold slot{&slots_};
   const MeshLimits limits{options_.max_vertices, options_.max_triangles};
-  return runCompute(context, call, [&] {
-    return parseMeshAsset(bytes, format, name, field, limits, &call.interrupter(), asset);
-  });
+  return computeAdmitted(context, call, meshParsePeakBytes(bytes.size()),
+                         fmt::format("parsing the mesh ({} bytes)", bytes.size()), [&] {
+                           return parseMeshAsset(bytes, format, name, field, limits, &call.interrupter(), asset);
+                         });
 }
 
 grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
@@ -321,17 +314,11 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
     if ((asset = cache_.find(volumeAssetId(h.dims(), data)))) {
       cached = true;
     } else {
-      MemoryBudget::Reservation parse_memory;
-      bool have_slot = false;
-      status = admitWork(context, *call, volumeParsePeakBytes(data.size()),
-                         fmt::format("analysing the volume ({} voxels)", data.size()), &parse_memory, &have_slot);
-      if (status.ok()) {
-        SlotHold slot{&slots_};
-        status = runCompute(context, *call, [&] {
-          return parseVolumeAsset(h.dims(), std::move(data), h.name(), "UploadVolumeChunk.header",
-                                  options_.max_voxels_per_query, &call->interrupter(), &asset);
-        });
-      }
+      status = computeAdmitted(context, *call, volumeParsePeakBytes(data.size()),
+                               fmt::format("analysing the volume ({} voxels)", data.size()), [&] {
+                                 return parseVolumeAsset(h.dims(), std::move(data), h.name(), "UploadVolumeChunk.header",
+                                                         options_.max_voxels_per_query, &call->interrupter(), &asset);
+                               });
       if (status.ok() && !cache_.insert(asset))
         status = Status::ResourceExhausted(
             fmt::format("UploadVolumeChunk.data: the volume needs {} bytes, more than the whole asset cache ({} bytes)",
@@ -439,11 +426,10 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
   // Admission: the estimated peak (seeds, engine, one output chunk, the stream buffer) and a compute slot.
   const uint64_t peak = q.memory.total() + options_.stream_buffer_bytes;
   MemoryBudget::Reservation memory;
-  bool have_slot = false;
+  ComputeSlot slot;
   const std::string what = fmt::format("the query ({}x{}x{} voxels, at most {} within the limit; {})", grid.dims().x,
                                        grid.dims().y, grid.dims().z, q.touched_voxels_bound, q.memory.summary());
-  if (Status s = admitWork(context, call, peak, what, &memory, &have_slot); !s.ok()) return log(s, "");
-  SlotHold slot{&slots_};
+  if (Status s = admitWork(context, call, peak, what, &memory, &slot); !s.ok()) return log(s, "");
   record->reserved_bytes = memory.bytes();
   const double queue_seconds = since(t0);
 

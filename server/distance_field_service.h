@@ -76,11 +76,25 @@ class DistanceFieldService final : public v1::DistanceField::Service {
  private:
   /// Step 1 of the contract: admits the call (or says why not).
   Status admitCall(grpc::ServerContext* context, const char* method, std::unique_ptr<ActiveCalls::Call>* call);
-  /// Step 3: reserves `bytes` and a compute slot, waiting at most --queue-wait-ms in total.
+  /// A compute slot, released when this goes out of scope.
+  struct ComputeSlot {
+    QuerySlots* slots = nullptr;
+    ComputeSlot() = default;
+    ComputeSlot(const ComputeSlot&) = delete;
+    ComputeSlot& operator=(const ComputeSlot&) = delete;
+    ~ComputeSlot() {
+      if (slots) slots->release();
+    }
+  };
+  /// Step 3: reserves `bytes` into `reservation` and a compute slot into `slot`, waiting at most --queue-wait-ms in
+  /// total. On any error neither is held.
   Status admitWork(grpc::ServerContext* context, ActiveCalls::Call& call, uint64_t bytes, const std::string& what,
-                   MemoryBudget::Reservation* reservation, bool* have_slot);
+                   MemoryBudget::Reservation* reservation, ComputeSlot* slot);
   /// Step 4: runs `work` on a compute thread in the arena; the handler thread watches the context meanwhile.
   Status runCompute(grpc::ServerContext* context, ActiveCalls::Call& call, const std::function<Status()>& work);
+  /// Steps 3 and 4 for work that reserves `bytes` while it runs (parsing an upload).
+  Status computeAdmitted(grpc::ServerContext* context, ActiveCalls::Call& call, uint64_t bytes, const std::string& what,
+                         const std::function<Status()>& work);
 
   /// Reads an upload stream into `data`. `on_header` checks the first chunk's header and gives the data size it
   /// promises (0: unknown). The buffer and its reservation in the memory budget grow with the bytes that arrive
