@@ -263,13 +263,8 @@ class BandRun {
     return link_tables_[(cls(local.z) * 9 + cls(local.y) * 3 + cls(local.x)) * 32 + dir];
   }
 
-  /// Whether the run must stop. Cheap (a relaxed load, and a clock read with a deadline).
-  bool stopping() const {
-    if (stopped_.load(std::memory_order_relaxed)) return true;
-    if (!isInterrupted(opt_.interrupter)) return false;
-    stopped_.store(true, std::memory_order_relaxed);
-    return true;
-  }
+  /// Whether the run must stop. Cheap: a relaxed load once tripped (and a clock read while a deadline is pending).
+  bool stopping() const { return isInterrupted(opt_.interrupter); }
   /// stopping(), polled at item i of a parallel range every `every` items (a power of two). A poll per range is not
   /// enough: TBB's auto_partitioner hands out ranges of up to 1/(4 x threads) of a loop, which at 1024^3 is a few
   /// hundred milliseconds of work. `every` keeps a poll interval near 0.1 ms of the loop's work per item.
@@ -400,7 +395,6 @@ class BandRun {
   std::vector<uint32_t> pending_bricks_;
   FrontList deferred_;
   int64_t corrections_ = 0;
-  mutable std::atomic<bool> stopped_{false};  // the interrupter was seen tripped: every loop winds down
 };
 
 void BandRun::buildLinkTables() {
@@ -876,10 +870,8 @@ void BandRun::collectPending() {
     pending_bricks_.insert(pending_bricks_.end(), tb.pending.begin(), tb.pending.end());
     tb.pending.clear();
   }
-  if (!runInterruptible(opt_.interrupter, [&] { tbb::parallel_sort(pending_bricks_.begin(), pending_bricks_.end()); })) {
-    stopped_.store(true);
-    return;
-  }
+  if (!runInterruptible(opt_.interrupter, [&] { tbb::parallel_sort(pending_bricks_.begin(), pending_bricks_.end()); }))
+    return;  // stopping() says so from now on
   pending_bricks_.erase(std::unique(pending_bricks_.begin(), pending_bricks_.end()), pending_bricks_.end());
 }
 
@@ -1082,10 +1074,8 @@ EngineResult BandRun::run() {
     auto same = [](const FrontEntry& a, const FrontEntry& b) {
       return a.brick == b.brick && a.offset == b.offset && a.site == b.site;
     };
-    if (!runInterruptible(opt_.interrupter, [&] { tbb::parallel_sort(deferred_.begin(), deferred_.end(), order); })) {
-      stopped_.store(true);
-      return FrontList();
-    }
+    if (!runInterruptible(opt_.interrupter, [&] { tbb::parallel_sort(deferred_.begin(), deferred_.end(), order); }))
+      return FrontList();  // stopping() says so from now on
     deferred_.erase(std::unique(deferred_.begin(), deferred_.end(), same), deferred_.end());
     FrontList f;
     f.swap(deferred_);

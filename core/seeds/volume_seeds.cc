@@ -1,7 +1,6 @@
 #include "core/seeds/volume_seeds.h"
 
 #include <algorithm>
-#include <atomic>
 #include <iterator>
 #include <memory>
 
@@ -40,13 +39,7 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
            (z > 0 && inside(i - sz) != in) || (z + 1 < d.z && inside(i + sz) != in);
   };
   std::vector<Slice> slices(size_t(d.z));
-  std::atomic<bool> stopped{false};
-  auto stop = [&] {
-    if (stopped.load(std::memory_order_relaxed)) return true;
-    if (!isInterrupted(interrupter)) return false;
-    stopped.store(true, std::memory_order_relaxed);
-    return true;
-  };
+  auto stop = [&] { return isInterrupted(interrupter); };
   // 1. Boundary voxels (the sites) and, unsigned, the band: every mask voxel, the boundary ones with their site.
   tbb::parallel_for(0, d.z, [&](int z) {
     if (stop()) return;
