@@ -203,7 +203,9 @@ struct SiteMetric {
   // Squared distance in voxels from voxel (x,y,z) to a site (key form), in double (the emitted value) ...
   double dist2(uint32_t site, double x, double y, double z) const {
     if (site == kNoSiteKey) return 0.0;
-    const Vec3d p{x, y, z};
+    // Sites live in the index space of the grid this one is a window of; integer offsets add exactly, so a tile
+    // computes the same doubles as the whole grid would.
+    const Vec3d p{x + seeds.site_offset.x, y + seeds.site_offset.y, z + seeds.site_offset.z};
     if (seeds.kind == SiteKind::kPoint) return (p - seeds.points[site]).lengthSqr();
     const auto& t = seeds.triangles[site];
     return TriangleDistance(t[0], t[1], t[2]).dist2(p);
@@ -453,7 +455,8 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
   const int step = step_;
   // Point sites: the offset from the site to p, so a neighbour's squared distance is three multiply-adds.
   Vec3d rel{};
-  if constexpr (kPoints) rel = Vec3d{double(p.x), double(p.y), double(p.z)} - seeds_.points[site];
+  const Coord ps = p + seeds_.site_offset;  // p in the sites' index space (the grid this one may be a window of)
+  if constexpr (kPoints) rel = Vec3d{double(ps.x), double(ps.y), double(ps.z)} - seeds_.points[site];
   // Triangle sites: one precomputed triangle for every neighbour, and its plane (a lower bound, below).
   std::optional<TriangleDistance> tri;
   Vec3d plane_point{}, unit_normal{};
@@ -485,7 +488,7 @@ void BandRun::pushFromT(const FrontEntry& e, ThreadBuffers& tb) {
       const double x = rel.x + d.fx, y = rel.y + d.fy, z = rel.z + d.fz;
       d2 = float(x * x + y * y + z * z);
     } else {
-      const Vec3d g{double(p.x + d.x), double(p.y + d.y), double(p.z + d.z)};
+      const Vec3d g{double(ps.x + d.x), double(ps.y + d.y), double(ps.z + d.z)};
       // The plane's distance bounds the triangle's from below: an offer it already shows to be worse is
       // rejected without the full test (float rounding is monotone, so the outcome is the same).
       const double plane = unit_normal.dot(g - plane_point);

@@ -19,6 +19,23 @@ inline constexpr int kBrickVoxels = kBrickSize * kBrickSize * kBrickSize;
 /// The largest extent the engine accepts along one axis (steps and brick tables are sized for it).
 inline constexpr int kMaxGridDim = 16384;
 
+/// A box of voxels, [min, min + dims) along each axis (a tile of a grid, or the part of it a tile delivers).
+struct VoxelBox {
+  Coord min{};
+  Coord dims{};
+  Coord end() const { return min + dims; }
+  bool contains(const Coord& c) const {
+    return c.x >= min.x && c.y >= min.y && c.z >= min.z && c.x < min.x + dims.x && c.y < min.y + dims.y &&
+           c.z < min.z + dims.z;
+  }
+  bool contains(const VoxelBox& b) const {
+    return b.min.x >= min.x && b.min.y >= min.y && b.min.z >= min.z && b.end().x <= end().x &&
+           b.end().y <= end().y && b.end().z <= end().z;
+  }
+  int64_t voxelCount() const { return int64_t(dims.x) * dims.y * dims.z; }
+  friend bool operator==(const VoxelBox&, const VoxelBox&) = default;
+};
+
 class Grid {
  public:
   Grid() = default;
@@ -46,6 +63,10 @@ class Grid {
   }
   /// Linear index of a voxel in a dense x-fastest array ([z][y][x] in C order, as .npy files hold it).
   int64_t denseIndex(const Coord& c) const { return (int64_t(c.z) * dims_.y + c.y) * dims_.x + c.x; }
+
+  /// The grid of the voxels in `box` (inside this grid): same voxel size, origin at box.min's world position.
+  Grid window(const VoxelBox& box) const { return Grid(worldOf(box.min), voxel_size_, box.dims); }
+  VoxelBox box() const { return {{}, dims_}; }
 
   /// Empty string when usable, otherwise why not (dims out of range, non-finite or non-positive voxel size).
   std::string validate() const;

@@ -8,6 +8,8 @@
 //     neighbours (the interior of a seed volume). With `band_exact` the band's sites are final.
 //   * `region` (optional, dense x-fastest, one byte per voxel): propagation never crosses between voxels of
 //     different labels (used for signed seed volumes, where inside and outside have different site sets).
+//   * `site_offset`: sites are in the index space of a larger grid of which the engine's grid is the window at
+//     site_offset (a tile of a query split over servers); voxel c is at c + site_offset there. Zero otherwise.
 //   * `sign` (optional): called on every delivered brick to turn unsigned distances into signed ones
 //     (negative inside, OpenVDB's convention); it receives each masked voxel's site.
 #pragma once
@@ -43,6 +45,7 @@ struct Seeds {
   /// never offers anything to band voxels, which saves most of the work of thin bands.
   bool band_exact = false;
   std::shared_ptr<const std::vector<uint8_t>> region;  ///< null, or grid.voxelCount() labels
+  Coord site_offset{};  ///< where the engine's grid sits in the sites' index space (see above)
   /// Signs the masked values of `brick` in place; `sites[i]` is the site of voxel offset i (kNoSite if none).
   std::function<void(Brick& brick, const uint32_t* sites)> sign;
 

@@ -17,6 +17,7 @@
 #include "server/grpc_status.h"
 #include "server/query_job.h"
 #include "server/request_validation.h"
+#include "server/tiled_query.h"
 
 namespace distband {
 namespace {
@@ -73,6 +74,11 @@ DistanceFieldService::DistanceFieldService(const ServerOptions& options, ServerH
       calls_(options.max_streams, std::chrono::milliseconds(int64_t(options.idle_timeout_seconds * 1000))) {}
 
 DistanceFieldService::~DistanceFieldService() = default;
+
+Status DistanceFieldService::connectPeers() {
+  if (options_.peers.empty()) return Status::Ok();
+  return ReplicaPool::create(options_, &pool_);
+}
 
 Status DistanceFieldService::admitCall(grpc::ServerContext* context, const char* method,
                                        std::unique_ptr<ActiveCalls::Call>* call) {
@@ -368,6 +374,10 @@ grpc::Status DistanceFieldService::GetInfo(grpc::ServerContext* context, const v
   r->set_max_triangles(options_.max_triangles);
   r->set_max_vertices(options_.max_vertices);
   r->set_auth_required(auth_ != nullptr);
+  if (pool_) {
+    r->set_replicas(uint32_t(pool_->replicas().size()));
+    r->set_tile_voxels(options_.tile_voxels);
+  }
   spdlog::info("GetInfo peer={} status=OK", context->peer());
   return grpc::Status::OK;
 }
@@ -424,7 +434,9 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
   segment = q.engine.segment_length_world;
 
   // Admission: the estimated peak (seeds, engine, one output chunk, the stream buffer) and a compute slot.
-  const uint64_t peak = q.memory.total() + options_.stream_buffer_bytes;
+  // A coordinator computes nothing itself: it holds its stream buffer and the later segments it may buffer.
+  const uint64_t peak =
+      pool_ ? TiledQuery::reservedBytes(options_) : q.memory.total() + options_.stream_buffer_bytes;
   MemoryBudget::Reservation memory;
   ComputeSlot slot;
   const std::string what = fmt::format("the query ({}x{}x{} voxels, at most {} within the limit; {})", grid.dims().x,
@@ -445,16 +457,21 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
     if (!write(header))
       return log(interrupter.interrupted() ? interrupter.status() : Status::Cancelled("the client went away"), "");
   }
-  const int encoding = q.encoding;
-  QueryJob job(std::move(q), arena_.get(), options_.stream_buffer_bytes, &interrupter);
-  job.start();
+  std::unique_ptr<QueryStream> job;
+  if (pool_) {
+    TiledQuery::Config config{options_, *pool_, call.interrupter(), context->deadline()};
+    job = std::make_unique<TiledQuery>(std::move(q), config);
+  } else {
+    job = std::make_unique<QueryJob>(std::move(q), arena_.get(), options_.stream_buffer_bytes, &interrupter);
+  }
+  job->start();
   record->engine_ran = true;
   uint64_t messages = 1;
-  QueryJob::Message msg;
+  QueryStream::Message msg;
   for (;;) {
-    const auto r = job.queue().pop(&msg, std::chrono::milliseconds(5));
-    if (r == BoundedQueue<QueryJob::Message>::PopResult::kClosed) break;
-    if (r == BoundedQueue<QueryJob::Message>::PopResult::kItem) {
+    const auto r = job->queue().pop(&msg, std::chrono::milliseconds(5));
+    if (r == BoundedQueue<QueryStream::Message>::PopResult::kClosed) break;
+    if (r == BoundedQueue<QueryStream::Message>::PopResult::kItem) {
       if (write(*msg)) ++messages;
       else interrupter.cancel(Status::Code::kCancelled, "the client went away");
       msg.reset();
@@ -463,53 +480,35 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
       interrupter.cancel(Status::Code::kCancelled, "the client cancelled the query");
     if (interrupter.interrupted()) {
       record->cancel_seen = Clock::now();
-      job.stop();
+      job->stop();
       break;
     }
   }
-  job.join();
-  const EngineResult& res = job.result();
-  record->engine_stopped = job.engineStopped();
-  record->interrupted = res.interrupted;
-  record->voxels = uint64_t(res.voxels);
-  record->bricks = job.bricksSent();
+  job->join();
+  v1::QueryReply reply;
+  v1::QuerySummary* s = reply.mutable_summary();
+  job->summarize(s);
+  record->engine_stopped = job->stopped();
+  record->interrupted = job->interrupted() || interrupter.interrupted();
+  record->voxels = s->voxels();
+  record->bricks = s->bricks();
   record->messages = messages;
-  record->bytes = job.valueBytes();
-  record->segments = int(res.segments.size());
-  const std::string stats = fmt::format(
-      "segments={} voxels={} bricks={} messages={} MB={:.1f} seeds={:.3f}s compute={:.3f}s enc={} reserved={}",
-      res.segments.size(), res.voxels, job.bricksSent(), messages, job.valueBytes() / 1e6, job.seedSeconds(),
-      res.seconds, encoding == v1::BRICK_ENCODING_FLOAT16 ? "f16" : "f32", humanBytes(memory.bytes()));
+  record->bytes = s->value_bytes();
+  record->segments = s->segments_size();
+  record->tiles = job->tiles();
+  record->tile_retries = job->retries();
+  const std::string stats =
+      fmt::format("{} messages={} reserved={}", job->logStats(), messages, humanBytes(memory.bytes()));
   if (interrupter.interrupted()) {
     if (record->cancel_seen == Clock::time_point{}) record->cancel_seen = Clock::now();
     const double stop_ms =
         std::chrono::duration<double, std::milli>(record->engine_stopped - record->cancel_seen).count();
     return log(interrupter.status(), fmt::format("{} engine_stop_after_cancel={:.1f}ms", stats, stop_ms));
   }
-  if (!job.status().ok()) return log(job.status(), stats);
+  if (!job->status().ok()) return log(job->status(), stats);
 
-  v1::QueryReply reply;
-  v1::QuerySummary* s = reply.mutable_summary();
-  s->set_voxels(uint64_t(res.voxels));
-  s->set_bricks(job.bricksSent());
   s->set_messages(messages + 1);
-  s->set_value_bytes(job.valueBytes());
-  s->set_steps(uint32_t(res.steps));
-  s->set_seed_seconds(job.seedSeconds());
-  s->set_compute_seconds(res.seconds);
   s->set_queue_seconds(queue_seconds);
-  for (size_t i = 0; i < res.segments.size(); ++i) {
-    const SegmentStats& st = res.segments[i];
-    v1::SegmentTiming* t = s->add_segments();
-    t->set_segment(uint32_t(st.index));
-    t->set_lower(st.lower_world);
-    t->set_upper(st.upper_world);
-    t->set_voxels(uint64_t(st.voxels));
-    t->set_bricks(i < job.segmentBricks().size() ? job.segmentBricks()[i] : uint64_t(st.bricks));
-    t->set_steps(uint32_t(st.steps));
-    t->set_compute_seconds(st.seconds);
-    if (i < job.segmentSentSeconds().size()) t->set_sent_seconds(job.segmentSentSeconds()[i]);
-  }
   s->set_total_seconds(since(t0));
   if (!write(reply))
     return log(interrupter.interrupted() ? interrupter.status() : Status::Cancelled("the client went away"), stats);

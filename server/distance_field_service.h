@@ -33,6 +33,7 @@
 #include "server/asset_cache.h"
 #include "server/memory_budget.h"
 #include "server/query_slots.h"
+#include "server/replica_pool.h"
 #include "server/server_options.h"
 #include "server/token_auth.h"
 
@@ -62,6 +63,11 @@ class DistanceFieldService final : public v1::DistanceField::Service {
                      grpc::ServerWriter<v1::QueryReply>* writer) override;
   grpc::Status GetInfo(grpc::ServerContext* context, const v1::GetInfoRequest* request,
                        v1::ServerInfo* reply) override;
+
+  /// With --peers: connects to the replicas (reads the --peer-* files); the service then coordinates (see
+  /// server/tiled_query.h). Called once by the server before it serves.
+  Status connectPeers();
+  bool coordinating() const { return pool_ != nullptr; }
 
   void beginShutdown() { shutting_down_.store(true); }
   /// Cancels every running call (their Interrupters trip with `reason`).
@@ -115,6 +121,7 @@ class DistanceFieldService final : public v1::DistanceField::Service {
   const std::unique_ptr<TokenAuth> auth_;
   const MemoryPlan plan_;
   std::unique_ptr<tbb::task_arena> arena_;
+  std::unique_ptr<ReplicaPool> pool_;  ///< set when coordinating
   AssetCache cache_;
   MemoryBudget budget_;
   QuerySlots slots_;

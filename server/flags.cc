@@ -69,6 +69,39 @@ void addServerFlags(CLI::App& app, ServerOptions* o) {
                  "(health checks do not)")
       ->check(CLI::ExistingFile);
   app.add_flag("--reflection", o->reflection, "serve gRPC server reflection (off by default)");
+  // Coordinator: one query over many replicas (docs/scale-out.md).
+  app.add_option("--peers", o->peers,
+                 "act as a coordinator: split queries into tiles computed by these replicas, a gRPC target "
+                 "(ipv4:HOST:PORT,HOST:PORT,... or dns:///HEADLESS-SERVICE:PORT); uploads are kept here and passed on")
+      ->group("Coordinator");
+  app.add_option("--tile-voxels", o->tile_voxels, "largest tile; a grid with more voxels is split (whole bricks)")
+      ->capture_default_str()
+      ->group("Coordinator");
+  app.add_option("--tiles-in-flight", o->tiles_in_flight_per_replica, "concurrent tile calls per replica")
+      ->capture_default_str()
+      ->group("Coordinator");
+  app.add_option("--tile-retries", o->tile_retries,
+                 "times a failed tile (replica gone, busy, timed out) is retried before the query fails UNAVAILABLE")
+      ->capture_default_str()
+      ->group("Coordinator");
+  app.add_option("--tile-timeout", o->tile_timeout_seconds,
+                 "seconds a tile call may take before it is retried elsewhere (the client's deadline, when sooner, wins)")
+      ->capture_default_str()
+      ->group("Coordinator");
+  app.add_option("--tile-buffer-bytes", o->tile_buffer_bytes,
+                 "per query: later segments held while an earlier one waits for slower tiles (beyond: RESOURCE_EXHAUSTED)")
+      ->transform(bytes)
+      ->capture_default_str()
+      ->group("Coordinator");
+  app.add_option("--peer-ca", o->peer_ca_file, "PEM CA bundle: reach the replicas over TLS")
+      ->check(CLI::ExistingFile)
+      ->group("Coordinator");
+  app.add_option("--peer-tls-name", o->peer_tls_name,
+                 "name the replicas' certificates are checked against (default: each address)")
+      ->group("Coordinator");
+  app.add_option("--peer-token-file", o->peer_token_file, "file whose first token is sent to the replicas")
+      ->check(CLI::ExistingFile)
+      ->group("Coordinator");
 }
 
 }  // namespace distband

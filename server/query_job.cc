@@ -62,7 +62,7 @@ void QueryJob::run() {
       options.interrupter = interrupter_;
       options.max_chunk_bricks = kQueryChunkBricks;
       segment_started_ = Clock::now();
-      result_ = computeDistanceField(query_.grid, std::move(seeds), options,
+      result_ = computeDistanceField(query_.engineGrid(), std::move(seeds), options,
                                      [this](SegmentBricks&& s) { emitChunk(std::move(s)); });
     });
   } catch (const std::bad_alloc&) {
@@ -76,8 +76,48 @@ void QueryJob::run() {
   queue_.close();
 }
 
+void QueryJob::summarize(v1::QuerySummary* s) const {
+  s->set_voxels(voxels_sent_);
+  s->set_bricks(bricks_sent_);
+  s->set_value_bytes(value_bytes_);
+  s->set_steps(uint32_t(result_.steps));
+  s->set_seed_seconds(seed_seconds_);
+  s->set_compute_seconds(result_.seconds);
+  for (size_t i = 0; i < result_.segments.size(); ++i) {
+    const SegmentStats& st = result_.segments[i];
+    v1::SegmentTiming* t = s->add_segments();
+    t->set_segment(uint32_t(st.index));
+    t->set_lower(st.lower_world);
+    t->set_upper(st.upper_world);
+    t->set_voxels(i < segment_voxels_sent_.size() ? segment_voxels_sent_[i] : uint64_t(st.voxels));
+    t->set_bricks(i < segment_bricks_.size() ? segment_bricks_[i] : uint64_t(st.bricks));
+    t->set_steps(uint32_t(st.steps));
+    t->set_compute_seconds(st.seconds);
+    if (i < segment_sent_seconds_.size()) t->set_sent_seconds(segment_sent_seconds_[i]);
+  }
+}
+
+std::string QueryJob::logStats() const {
+  return fmt::format("segments={} voxels={} bricks={} MB={:.1f} seeds={:.3f}s compute={:.3f}s enc={}",
+                     result_.segments.size(), voxels_sent_, bricks_sent_, value_bytes_ / 1e6, seed_seconds_,
+                     result_.seconds, query_.encoding == v1::BRICK_ENCODING_FLOAT16 ? "f16" : "f32");
+}
+
 void QueryJob::emitChunk(SegmentBricks&& chunk) {
   segment_compute_seconds_ += secondsBetween(segment_started_, Clock::now());
+  if (query_.tile) {
+    // A tile: bricks move to the whole grid's coordinates; those of the halo (outside `deliver`, whole bricks since
+    // both boxes are brick-aligned) are not sent. Order (z, y, x) is kept: the shift is the same for every brick.
+    const Coord shift = query_.tile->window.min;
+    size_t kept = 0;
+    for (Brick& b : chunk.bricks) {
+      b.origin = b.origin + shift;
+      if (!query_.tile->deliver.contains(b.origin)) continue;
+      if (&chunk.bricks[kept] != &b) chunk.bricks[kept] = std::move(b);
+      ++kept;
+    }
+    chunk.bricks.resize(kept);
+  }
   const v1::BrickEncoding enc = query_.encoding;
   const size_t n = chunk.bricks.size();
   // Batches: always at least one brick per message; a batch stops before exceeding the byte bound.
@@ -135,7 +175,9 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
     d->set_compute_seconds(segment_compute_seconds_);
     d->set_last(chunk.last);
     bricks_sent_ += segment_bricks_so_far_;
+    voxels_sent_ += segment_voxels_;
     segment_bricks_.push_back(segment_bricks_so_far_);
+    segment_voxels_sent_.push_back(segment_voxels_);
     segment_sent_seconds_.push_back(secondsBetween(started_, Clock::now()));
     segment_voxels_ = segment_bricks_so_far_ = 0;
     segment_compute_seconds_ = 0;

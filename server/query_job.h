@@ -26,33 +26,38 @@
 #include "core/status.h"
 #include "distband/v1/distband.pb.h"
 #include "server/bounded_queue.h"
+#include "server/query_stream.h"
 #include "server/request_validation.h"
 
 namespace distband {
 
-class QueryJob {
+class QueryJob final : public QueryStream {
  public:
-  using Clock = std::chrono::steady_clock;
-  using Message = std::unique_ptr<v1::QueryReply>;
-
   QueryJob(ResolvedQuery query, tbb::task_arena* arena, uint64_t buffer_bytes, Interrupter* interrupter);
-  ~QueryJob();  ///< stops and joins if still running
+  ~QueryJob() override;  ///< stops and joins if still running
   QueryJob(const QueryJob&) = delete;
   QueryJob& operator=(const QueryJob&) = delete;
 
-  void start();
+  void start() override;
   /// Drops queued messages and refuses new ones; the caller trips the interrupter (with its reason) first.
-  void stop();
-  void join();
-  BoundedQueue<Message>& queue() { return queue_; }
+  void stop() override;
+  void join() override;
+  BoundedQueue<Message>& queue() override { return queue_; }
 
   // Valid after join().
-  const Status& status() const { return status_; }  ///< seed or engine failure (OK when none)
+  const Status& status() const override { return status_; }  ///< seed or engine failure (OK when none)
+  bool interrupted() const override { return result_.interrupted; }
+  Clock::time_point stopped() const override { return engine_stopped_; }
+  void summarize(v1::QuerySummary* summary) const override;
+  std::string logStats() const override;
   const EngineResult& result() const { return result_; }
   double seedSeconds() const { return seed_seconds_; }
   Clock::time_point engineStopped() const { return engine_stopped_; }
   Clock::time_point started() const { return started_; }
   uint64_t bricksSent() const { return bricks_sent_; }
+  /// Voxels streamed (for a tile: those of its `deliver` box; the engine's count includes the halo).
+  uint64_t voxelsSent() const { return voxels_sent_; }
+  const std::vector<uint64_t>& segmentVoxels() const { return segment_voxels_sent_; }
   uint64_t valueBytes() const { return value_bytes_; }
   const std::vector<double>& segmentSentSeconds() const { return segment_sent_seconds_; }
   const std::vector<uint64_t>& segmentBricks() const { return segment_bricks_; }
@@ -73,7 +78,8 @@ class QueryJob {
   Clock::time_point started_{}, engine_stopped_{}, segment_started_{};
   double segment_compute_seconds_ = 0;
   uint64_t segment_voxels_ = 0, segment_bricks_so_far_ = 0;  ///< of the segment being emitted
-  uint64_t bricks_sent_ = 0, value_bytes_ = 0;
+  uint64_t bricks_sent_ = 0, voxels_sent_ = 0, value_bytes_ = 0;
+  std::vector<uint64_t> segment_voxels_sent_;
   std::vector<double> segment_sent_seconds_;
   std::vector<uint64_t> segment_bricks_;
 };

@@ -74,7 +74,8 @@ Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, Ass
   return invalid("seeds: exactly one of asset_id, mesh, points, volume must be set");
 }
 
-Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* grid) {
+// A volume covers the whole grid, or a tile's window only (then its dims are the window's and the grid needs dims).
+Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, Grid* grid) {
   if (g.voxel_size() != 0 && !(std::isfinite(g.voxel_size()) && g.voxel_size() > 0))
     return invalid(fmt::format("grid.voxel_size must be finite and > 0 when set (got {})", g.voxel_size()));
   if (g.resolution() != 0 && (g.resolution() < 2 || g.resolution() > uint32_t(kMaxGridDim)))
@@ -84,6 +85,8 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* grid) {
   if (g.has_origin() && !finite(g.origin()))
     return invalid("grid.origin must have finite coordinates");
   const bool volume = q.seed_kind == ResolvedQuery::SeedKind::kVolume;
+  if (volume && tile && !g.has_dims())
+    return invalid("grid.dims must be set for a tile of volume seeds (the volume covers only the tile's window)");
 
   if (g.has_dims() || volume) {  // way a
     if (g.has_box()) return invalid("grid.box and grid.dims are mutually exclusive");
@@ -93,7 +96,7 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* grid) {
     if (g.has_dims()) {
       if (Status s = checkDims(g.dims(), "grid.dims"); !s.ok()) return s;
       dims = {int32_t(g.dims().x()), int32_t(g.dims().y()), int32_t(g.dims().z())};
-      if (volume && !(dims == q.asset->dims))
+      if (volume && !tile && !(dims == q.asset->dims))
         return invalid(fmt::format("grid.dims ({}x{}x{}) must equal the volume's dims ({}x{}x{}) or be omitted",
                                    dims.x, dims.y, dims.z, q.asset->dims.x, q.asset->dims.y, q.asset->dims.z));
     } else {
@@ -132,6 +135,38 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, Grid* grid) {
     }
   }
   if (std::string e = gridForMesh(*bounds, mo, grid); !e.empty()) return invalid("grid: " + e);
+  return Status::Ok();
+}
+
+Status resolveBox(const v1::VoxelBox& b, const Grid& grid, const char* field, VoxelBox* out) {
+  const Coord dims = grid.dims();
+  const uint32_t min[3] = {b.min_x(), b.min_y(), b.min_z()}, size[3] = {b.size_x(), b.size_y(), b.size_z()};
+  const int extent[3] = {dims.x, dims.y, dims.z};
+  for (int a = 0; a < 3; ++a) {
+    const char axis = "xyz"[a];
+    if (min[a] % kBrickSize != 0)
+      return invalid(fmt::format("{}.min_{} must be a multiple of 8 (got {})", field, axis, min[a]));
+    if (size[a] == 0 || uint64_t(min[a]) + size[a] > uint64_t(extent[a]))
+      return invalid(fmt::format("{}: min_{} + size_{} must lie in [1, grid dims.{} = {}] (got {} + {})", field, axis,
+                                 axis, axis, extent[a], min[a], size[a]));
+    if ((min[a] + size[a]) % kBrickSize != 0 && min[a] + size[a] != uint32_t(extent[a]))
+      return invalid(fmt::format("{}: min_{} + size_{} must be a multiple of 8 or the grid's extent {} (got {})", field,
+                                 axis, axis, extent[a], min[a] + size[a]));
+  }
+  *out = {{int(min[0]), int(min[1]), int(min[2])}, {int(size[0]), int(size[1]), int(size[2])}};
+  return Status::Ok();
+}
+
+Status resolveTile(const v1::Tile& t, const Grid& grid, ResolvedQuery* q) {
+  TilePlan tile;
+  if (Status s = resolveBox(t.window(), grid, "tile.window", &tile.window); !s.ok()) return s;
+  if (Status s = resolveBox(t.deliver(), grid, "tile.deliver", &tile.deliver); !s.ok()) return s;
+  if (!tile.window.contains(tile.deliver)) return invalid("tile.deliver must lie inside tile.window");
+  if (q->seed_kind == ResolvedQuery::SeedKind::kVolume && !(q->asset->dims == tile.window.dims))
+    return invalid(fmt::format("volume: a tile's volume covers its window: dims must be {}x{}x{} (got {}x{}x{})",
+                               tile.window.dims.x, tile.window.dims.y, tile.window.dims.z, q->asset->dims.x,
+                               q->asset->dims.y, q->asset->dims.z));
+  q->tile = tile;
   return Status::Ok();
 }
 
@@ -174,17 +209,18 @@ Status checkSites(const ResolvedQuery& q) {
 
 // The touched-voxel bound of the seeds within the limit, and the peak bytes the query is admitted with.
 void estimateMemory(ResolvedQuery* q) {
-  const double limit_voxels = q->engine.limit_world / q->grid.voxelSize();
-  BandExtent extent(q->grid, limit_voxels);
+  const Grid grid = q->engineGrid();
+  const double limit_voxels = q->engine.limit_world / grid.voxelSize();
+  BandExtent extent(grid, limit_voxels);
   FieldMemoryInput in;
   in.mode = q->engine.mode;
-  in.grid_voxels = uint64_t(q->grid.voxelCount());
+  in.grid_voxels = uint64_t(grid.voxelCount());
   in.chunk_bricks = kQueryChunkBricks;
   switch (q->seed_kind) {
     case ResolvedQuery::SeedKind::kPoints:
       in.seed_kind = FieldMemoryInput::SeedKind::kPoints;
       in.points = q->points.size();
-      for (const Vec3d& p : q->points) extent.addPoint(q->grid.indexOf(p));
+      for (const Vec3d& p : q->points) extent.addPoint(grid.indexOf(p));
       break;
     case ResolvedQuery::SeedKind::kVolume:
       in.seed_kind = FieldMemoryInput::SeedKind::kVolume;
@@ -198,7 +234,7 @@ void estimateMemory(ResolvedQuery* q) {
       const TriangleMesh& mesh = *q->asset->mesh;
       in.mesh_vertices = mesh.vertices.size();
       in.mesh_triangles = mesh.triangles.size();
-      in.mesh_area_voxels = meshAreaVoxels(mesh, q->grid.voxelSize());
+      in.mesh_area_voxels = meshAreaVoxels(mesh, grid.voxelSize());
       switch (q->sign) {
         case v1::SIGN_MODE_WINDING: in.mesh_sign = SignMethod::kWinding; break;
         case v1::SIGN_MODE_PARITY: in.mesh_sign = SignMethod::kParity; break;
@@ -207,8 +243,8 @@ void estimateMemory(ResolvedQuery* q) {
       }
       if (!extent.wholeGrid())
         for (const auto& t : mesh.triangles) {
-          const Vec3d a = q->grid.indexOf(mesh.vertices[t[0]]), b = q->grid.indexOf(mesh.vertices[t[1]]),
-                      c = q->grid.indexOf(mesh.vertices[t[2]]);
+          const Vec3d a = grid.indexOf(mesh.vertices[t[0]]), b = grid.indexOf(mesh.vertices[t[1]]),
+                      c = grid.indexOf(mesh.vertices[t[2]]);
           extent.addBox({std::min({a.x, b.x, c.x}), std::min({a.y, b.y, c.y}), std::min({a.z, b.z, c.z})},
                         {std::max({a.x, b.x, c.x}), std::max({a.y, b.y, c.y}), std::max({a.z, b.z, c.z})});
         }
@@ -294,13 +330,18 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
                       : std::clamp<uint32_t>(r.max_batch_bytes(), 64u << 10, options.max_message_bytes);
 
   if (!r.has_grid()) return invalid("grid must be set (voxel_size or resolution, or dims)");
-  if (Status s = resolveGrid(r.grid(), q, &q.grid); !s.ok()) return s;
-  const uint64_t voxels = uint64_t(q.grid.voxelCount());
+  if (Status s = resolveGrid(r.grid(), q, r.has_tile(), &q.grid); !s.ok()) return s;
+  if (r.has_tile())
+    if (Status s = resolveTile(r.tile(), q.grid, &q); !s.ok()) return s;
+  // The budget bounds the work: the voxels computed (a tile's window, not the whole grid it belongs to).
+  const Grid computed = q.engineGrid();
+  const uint64_t voxels = uint64_t(computed.voxelCount());
   if (voxels > options.max_voxels_per_query)
     return Status::ResourceExhausted(
-        fmt::format("grid: {}x{}x{} = {} voxels exceeds the server's voxel budget of {} per query", q.grid.dims().x,
-                    q.grid.dims().y, q.grid.dims().z, voxels, options.max_voxels_per_query));
-  if (std::string e = validateOptions(q.grid, q.engine); !e.empty()) return invalid(e);
+        fmt::format("{}: {}x{}x{} = {} voxels exceeds the server's voxel budget of {} per query",
+                    q.tile ? "tile.window" : "grid", computed.dims().x, computed.dims().y, computed.dims().z, voxels,
+                    options.max_voxels_per_query));
+  if (std::string e = validateOptions(q.engineGrid(), q.engine); !e.empty()) return invalid(e);
   // Without a limit the engine's own segment-count rule does not apply: bound it by the grid's diagonal, the
   // largest distance a voxel can have, so a tiny segment length cannot request millions of empty segments.
   if (q.engine.segment_length_world > 0) {

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,6 +17,7 @@
 #include "core/field_memory.h"
 #include "core/status.h"
 #include "core/grid.h"
+#include "core/tiling.h"
 #include "distband/v1/distband.pb.h"
 #include "server/asset_cache.h"
 #include "server/server_options.h"
@@ -29,7 +31,10 @@ struct ResolvedQuery {
   std::shared_ptr<const Asset> asset;   ///< kVolume / kMesh (cached or inline)
   std::string seeds_label;              ///< for logs, e.g. "points(2)" or "mesh-1a2b…(bunny.obj)"
 
-  Grid grid;
+  Grid grid;                            ///< the whole grid (what the header describes)
+  /// Set for a tile (QueryRequest.tile): the engine computes grid.window(tile->window) and only the voxels of
+  /// tile->deliver are streamed.
+  std::optional<TilePlan> tile;
   EngineOptions engine;                 ///< threads and interrupted are set by the job
   v1::SignMode sign = v1::SIGN_MODE_UNSIGNED;            ///< never UNSPECIFIED
   v1::Stencil stencil = v1::STENCIL_CUBIC26;             ///< never UNSPECIFIED
@@ -40,6 +45,8 @@ struct ResolvedQuery {
   FieldMemoryEstimate memory;           ///< peak bytes of seeds + engine + one output chunk
 
   bool signedField() const { return sign != v1::SIGN_MODE_UNSIGNED; }
+  /// The grid the engine computes on: the tile's window, or the whole grid.
+  Grid engineGrid() const { return tile ? grid.window(tile->window) : grid; }
 };
 
 /// `inline_mesh`: the parsed QueryRequest.mesh when the request carries one (parsing is compute work that the

@@ -8,10 +8,10 @@ namespace distband {
 
 std::string buildSeeds(const ResolvedQuery& q, Seeds* seeds, const Interrupter* interrupter) {
   switch (q.seed_kind) {
-    case ResolvedQuery::SeedKind::kPoints:
-      return makePointSeeds(q.grid, q.points, seeds);
-    case ResolvedQuery::SeedKind::kVolume:
-      return makeVolumeSeeds(q.grid, *q.asset->mask, q.sign == v1::SIGN_MODE_MASK_INSIDE, seeds, interrupter);
+    case ResolvedQuery::SeedKind::kPoints:  // sites in the whole grid's coordinates: tiles stay bit-identical
+      return makePointSeeds(q.grid, q.points, seeds, q.tile ? &q.tile->window : nullptr);
+    case ResolvedQuery::SeedKind::kVolume:  // a tile's volume covers its window (checked by resolveQuery)
+      return makeVolumeSeeds(q.engineGrid(), *q.asset->mask, q.sign == v1::SIGN_MODE_MASK_INSIDE, seeds, interrupter);
     case ResolvedQuery::SeedKind::kMesh: {
       MeshSeedOptions o;
       o.mode = q.mode == v1::PROPAGATION_MODE_PAPER ? MeshSiteMode::kPaper : MeshSiteMode::kExactFeature;
@@ -23,7 +23,7 @@ std::string buildSeeds(const ResolvedQuery& q, Seeds* seeds, const Interrupter* 
       }
       o.limit_voxels = q.engine.limit_world / q.grid.voxelSize();
       o.interrupter = interrupter;
-      return makeMeshSeeds(q.grid, *q.asset->mesh, o, seeds);
+      return makeMeshSeeds(q.engineGrid(), *q.asset->mesh, o, seeds);
     }
   }
   return "unknown seed kind";

@@ -34,16 +34,6 @@ class WithoutReflection final : public grpc::ServerBuilderOption {
   }
 };
 
-Status readPem(const std::string& path, const char* flag, std::string* out) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status::InvalidArgument(fmt::format("{} {}: cannot read the file", flag, path));
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  *out = ss.str();
-  if (out->find("-----BEGIN ") == std::string::npos)
-    return Status::InvalidArgument(fmt::format("{} {}: not a PEM file (no -----BEGIN line)", flag, path));
-  return Status::Ok();
-}
 
 Status serverCredentials(const ServerOptions& o, std::shared_ptr<grpc::ServerCredentials>* out) {
   if (o.tls_cert_file.empty()) {
@@ -52,11 +42,11 @@ Status serverCredentials(const ServerOptions& o, std::shared_ptr<grpc::ServerCre
   }
   grpc::SslServerCredentialsOptions ssl;
   grpc::SslServerCredentialsOptions::PemKeyCertPair pair;
-  if (Status s = readPem(o.tls_key_file, "--tls-key", &pair.private_key); !s.ok()) return s;
-  if (Status s = readPem(o.tls_cert_file, "--tls-cert", &pair.cert_chain); !s.ok()) return s;
+  if (Status s = readPemFile(o.tls_key_file, "--tls-key", &pair.private_key); !s.ok()) return s;
+  if (Status s = readPemFile(o.tls_cert_file, "--tls-cert", &pair.cert_chain); !s.ok()) return s;
   ssl.pem_key_cert_pairs.push_back(std::move(pair));
   if (!o.tls_client_ca_file.empty()) {
-    if (Status s = readPem(o.tls_client_ca_file, "--tls-client-ca", &ssl.pem_root_certs); !s.ok()) return s;
+    if (Status s = readPemFile(o.tls_client_ca_file, "--tls-client-ca", &ssl.pem_root_certs); !s.ok()) return s;
     ssl.client_certificate_request = GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY;
   }
   *out = grpc::SslServerCredentials(ssl);
@@ -78,6 +68,7 @@ grpc::Status DistbandServer::start() {
   std::shared_ptr<grpc::ServerCredentials> credentials;
   if (Status s = serverCredentials(options_, &credentials); !s.ok()) return toGrpcStatus(s);
   service_ = std::make_unique<DistanceFieldService>(options_, hooks_, std::move(auth));
+  if (Status s = service_->connectPeers(); !s.ok()) return toGrpcStatus(s);
 
   grpc::EnableDefaultHealthCheckService(true);
   if (options_.reflection) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -109,6 +100,11 @@ grpc::Status DistbandServer::start() {
       options_.max_concurrent_queries, options_.max_streams, options_.resolvedGrpcThreads(), humanBytes(plan.total),
       humanBytes(plan.requests), humanBytes(plan.cache), humanBytes(plan.grpc), options_.idle_timeout_seconds,
       options_.auth_token_file.empty() ? ", no authentication" : ", bearer tokens required");
+  if (service_->coordinating())
+    spdlog::info("coordinating: queries are split into tiles of at most {} voxels computed by --peers {} ({} per "
+                 "replica in flight, {} retries, tile timeout {:g}s)",
+                 options_.tile_voxels, options_.peers, options_.tiles_in_flight_per_replica, options_.tile_retries,
+                 options_.tile_timeout_seconds);
   return grpc::Status::OK;
 }
 

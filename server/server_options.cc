@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <sstream>
 #include <string>
 #include <thread>
 
@@ -83,11 +84,30 @@ std::string ServerOptions::validate() const {
   if (tls_cert_file.empty() != tls_key_file.empty()) return "--tls-cert and --tls-key must be given together";
   if (!tls_client_ca_file.empty() && tls_cert_file.empty())
     return "--tls-client-ca needs --tls-cert and --tls-key (mutual TLS is TLS first)";
+  if (tile_voxels < 512 || tile_voxels > (uint64_t(1) << 36)) return "--tile-voxels must be in [512, 2^36]";
+  if (tiles_in_flight_per_replica < 1 || tiles_in_flight_per_replica > 64) return "--tiles-in-flight must be in [1, 64]";
+  if (tile_retries < 0 || tile_retries > 100) return "--tile-retries must be in [0, 100]";
+  if (!(tile_timeout_seconds > 0 && tile_timeout_seconds <= 86400)) return "--tile-timeout must be in (0, 86400]";
+  if (tile_buffer_bytes < (uint64_t(1) << 20)) return "--tile-buffer-bytes must be at least 1 MiB";
+  if (peers.empty() && !(peer_ca_file.empty() && peer_tls_name.empty() && peer_token_file.empty()))
+    return "--peer-ca, --peer-tls-name and --peer-token-file need --peers";
+  if (!peer_tls_name.empty() && peer_ca_file.empty()) return "--peer-tls-name needs --peer-ca (TLS to the replicas)";
   const uint64_t budget = resolvedMemoryBudget();
   if (budget < (uint64_t(64) << 20)) return fmt::format("--memory-budget must be at least 64 MiB (got {})", budget);
   if (resolvedCacheBytes() > budget / 2)
     return fmt::format("--cache-bytes ({}) must be at most half of --memory-budget ({})", resolvedCacheBytes(), budget);
   return {};
+}
+
+Status readPemFile(const std::string& path, const char* flag, std::string* out) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::InvalidArgument(fmt::format("{} {}: cannot read the file", flag, path));
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  *out = ss.str();
+  if (out->find("-----BEGIN ") == std::string::npos)
+    return Status::InvalidArgument(fmt::format("{} {}: not a PEM file (no -----BEGIN line)", flag, path));
+  return Status::Ok();
 }
 
 int ServerOptions::resolvedComputeThreads() const {

@@ -12,6 +12,8 @@
 
 #include <grpcpp/support/status.h>
 
+#include "core/status.h"
+
 namespace distband {
 
 struct ServerOptions {
@@ -45,12 +47,27 @@ struct ServerOptions {
   std::string auth_token_file;  ///< one bearer token a line; set = every DistanceField call needs one
   bool reflection = false;      ///< serve grpc.reflection.v1alpha (the schema is public, but off unless asked)
 
+  // Coordinator (server/tiled_query.h): with `peers` set, queries are split into tiles computed by the replicas.
+  std::string peers;             ///< gRPC target naming the replicas (server/replica_pool.h); empty = compute here
+  uint64_t tile_voxels = uint64_t(1) << 24;  ///< largest tile (voxels); grids beyond it are split
+  int tiles_in_flight_per_replica = 2;       ///< concurrent tile calls per replica
+  int tile_retries = 3;                      ///< retries of a failed tile (on other replicas) before giving up
+  double tile_timeout_seconds = 600;         ///< a tile call's own deadline (the client's, when sooner, wins)
+  /// Bytes of later segments a query may hold while an earlier one waits for slow tiles (beyond: RESOURCE_EXHAUSTED).
+  uint64_t tile_buffer_bytes = uint64_t(256) << 20;
+  std::string peer_ca_file;     ///< PEM: reach the replicas over TLS, trusting this CA
+  std::string peer_tls_name;    ///< name to check the replicas' certificates against (default: the address)
+  std::string peer_token_file;  ///< first token of the file is sent to the replicas as the bearer token
+
   std::string validate() const;
   int resolvedComputeThreads() const;  ///< compute_threads, or the core count when 0
   uint64_t resolvedMemoryBudget() const;
   uint64_t resolvedCacheBytes() const;
   int resolvedGrpcThreads() const;
 };
+
+/// Reads a PEM file named by `flag` (errors name the flag and the file; a file without a PEM block is refused).
+Status readPemFile(const std::string& path, const char* flag, std::string* out);
 
 /// The memory this process may use: min(RAM, cgroup v2 memory.max / v1 memory.limit_in_bytes, RLIMIT_AS).
 uint64_t processMemoryLimitBytes();
@@ -70,6 +87,7 @@ struct QueryRecord {
   uint64_t voxels = 0, bricks = 0, messages = 0, bytes = 0;
   uint64_t reserved_bytes = 0;         ///< the memory-budget reservation it was admitted with
   int segments = 0;
+  int tiles = 0, tile_retries = 0;     ///< a coordinator's query: tiles sent to replicas, attempts retried
 };
 
 struct ServerHooks {

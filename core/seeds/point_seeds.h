@@ -2,6 +2,9 @@
 // Contract: points are world coordinates and may lie outside the grid; each point seeds the voxels of the 3^3
 // block around its nearest in-grid voxel. Unsigned. Returns an error string (and leaves `out` untouched) for an
 // empty list or non-finite coordinates.
+// With `window` (a box of the grid) the seeds are for the engine grid grid.window(*window): the sites stay in the
+// whole grid's index space (Seeds::site_offset = window->min), so a tile's distances are bit-identical to the whole
+// grid's, and a point outside the window seeds the block around its nearest window voxel.
 #pragma once
 
 #include <string>
@@ -12,6 +15,7 @@
 
 namespace distband {
 
-std::string makePointSeeds(const Grid& grid, const std::vector<Vec3d>& world_points, Seeds* out);
+std::string makePointSeeds(const Grid& grid, const std::vector<Vec3d>& world_points, Seeds* out,
+                           const VoxelBox* window = nullptr);
 
 }  // namespace distband

@@ -1,0 +1,155 @@
+#include "server/replica_pool.h"
+
+#include <netdb.h>
+#include <sys/socket.h>
+#include <arpa/inet.h>
+
+#include <algorithm>
+#include <fstream>
+#include <sstream>
+
+#include <fmt/format.h>
+
+namespace distband {
+namespace {
+
+std::vector<std::string> split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  for (std::string part; std::getline(in, part, sep);)
+    if (!part.empty()) out.push_back(part);
+  return out;
+}
+
+// "host:port" or "[v6]:port" -> host, port.
+bool splitHostPort(const std::string& s, std::string* host, std::string* port) {
+  if (!s.empty() && s.front() == '[') {
+    const size_t close = s.find(']');
+    if (close == std::string::npos || close + 1 >= s.size() || s[close + 1] != ':') return false;
+    *host = s.substr(1, close - 1);
+    *port = s.substr(close + 2);
+  } else {
+    const size_t colon = s.rfind(':');
+    if (colon == std::string::npos) return false;
+    *host = s.substr(0, colon);
+    *port = s.substr(colon + 1);
+  }
+  return !host->empty() && !port->empty() && std::all_of(port->begin(), port->end(), ::isdigit);
+}
+
+}  // namespace
+
+std::vector<std::string> resolveReplicaAddresses(const std::string& target, std::string* error) {
+  std::vector<std::string> out;
+  if (target.rfind("ipv4:", 0) == 0 || target.rfind("ipv6:", 0) == 0) {
+    const std::string scheme = target.substr(0, 5);
+    for (const std::string& a : split(target.substr(5), ',')) out.push_back(scheme + a);
+    if (out.empty()) *error = fmt::format("--peers {}: no address after '{}'", target, scheme);
+    return out;
+  }
+  std::string name = target;
+  if (name.rfind("dns:///", 0) == 0) name = name.substr(7);
+  else if (name.rfind("dns:", 0) == 0) name = name.substr(4);
+  std::string host, port;
+  if (!splitHostPort(name, &host, &port)) {
+    *error = fmt::format("--peers {}: expected ipv4:ADDR:PORT,..., dns:///HOST:PORT or HOST:PORT", target);
+    return out;
+  }
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_STREAM;
+  addrinfo* found = nullptr;
+  if (int rc = getaddrinfo(host.c_str(), port.c_str(), &hints, &found); rc != 0) {
+    *error = fmt::format("--peers {}: cannot resolve {}: {}", target, host, gai_strerror(rc));
+    return out;
+  }
+  for (addrinfo* a = found; a; a = a->ai_next) {
+    char text[INET6_ADDRSTRLEN] = {};
+    if (a->ai_family == AF_INET) {
+      inet_ntop(AF_INET, &reinterpret_cast<sockaddr_in*>(a->ai_addr)->sin_addr, text, sizeof text);
+      out.push_back(fmt::format("ipv4:{}:{}", text, port));
+    } else if (a->ai_family == AF_INET6) {
+      inet_ntop(AF_INET6, &reinterpret_cast<sockaddr_in6*>(a->ai_addr)->sin6_addr, text, sizeof text);
+      out.push_back(fmt::format("ipv6:[{}]:{}", text, port));
+    }
+  }
+  freeaddrinfo(found);
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  if (out.empty()) *error = fmt::format("--peers {}: {} resolves to no address", target, host);
+  return out;
+}
+
+Status ReplicaPool::create(const ServerOptions& o, std::unique_ptr<ReplicaPool>* out) {
+  std::unique_ptr<ReplicaPool> pool(new ReplicaPool());
+  pool->target_ = o.peers;
+  pool->max_message_bytes_ = int(std::max<uint32_t>(o.max_message_bytes, 64u << 20));
+  if (o.peer_ca_file.empty()) {
+    pool->credentials_ = grpc::InsecureChannelCredentials();
+  } else {
+    grpc::SslCredentialsOptions ssl;
+    if (Status s = readPemFile(o.peer_ca_file, "--peer-ca", &ssl.pem_root_certs); !s.ok()) return s;
+    pool->credentials_ = grpc::SslCredentials(ssl);
+    pool->tls_name_ = o.peer_tls_name;
+  }
+  if (!o.peer_token_file.empty()) {
+    std::ifstream in(o.peer_token_file);
+    if (!in) return Status::InvalidArgument(fmt::format("--peer-token-file {}: cannot read the file", o.peer_token_file));
+    for (std::string line; std::getline(in, line);) {
+      const size_t b = line.find_first_not_of(" \t\r"), e = line.find_last_not_of(" \t\r");
+      if (b == std::string::npos || line[b] == '#') continue;
+      pool->token_ = line.substr(b, e - b + 1);
+      break;
+    }
+    if (pool->token_.empty())
+      return Status::InvalidArgument(fmt::format("--peer-token-file {}: the file holds no token", o.peer_token_file));
+  }
+  std::string error;
+  if (resolveReplicaAddresses(o.peers, &error).empty() && error.find("expected") != std::string::npos)
+    return Status::InvalidArgument(error);  // malformed; a name that does not resolve yet may later (pods starting)
+  const bool dns = o.peers.rfind("ipv4:", 0) != 0 && o.peers.rfind("ipv6:", 0) != 0;
+  pool->balanced_ = pool->makeChannel(dns && o.peers.rfind("dns:", 0) != 0 ? "dns:///" + o.peers : o.peers, true);
+  pool->balanced_stub_ = v1::DistanceField::NewStub(pool->balanced_);
+  *out = std::move(pool);
+  return Status::Ok();
+}
+
+std::shared_ptr<grpc::Channel> ReplicaPool::makeChannel(const std::string& target, bool round_robin) const {
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(max_message_bytes_);
+  args.SetMaxSendMessageSize(max_message_bytes_);
+  if (round_robin) args.SetLoadBalancingPolicyName("round_robin");
+  if (!tls_name_.empty()) args.SetSslTargetNameOverride(tls_name_);
+  // A replica that restarts is tried again within a second, not after gRPC's default back-off of up to 2 minutes.
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 200);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
+  args.SetInt(GRPC_ARG_DNS_MIN_TIME_BETWEEN_RESOLUTIONS_MS, 1000);
+  return grpc::CreateCustomChannel(target, credentials_, args);
+}
+
+std::vector<ReplicaPool::Replica> ReplicaPool::replicas() {
+  std::lock_guard lock(mu_);
+  const auto now = std::chrono::steady_clock::now();
+  if (!replicas_.empty() && now - resolved_at_ < std::chrono::seconds(1)) return replicas_;
+  std::string error;
+  std::vector<Replica> fresh;
+  for (const std::string& a : resolveReplicaAddresses(target_, &error)) {
+    auto old = std::find_if(replicas_.begin(), replicas_.end(), [&](const Replica& r) { return r.address == a; });
+    fresh.push_back({a, old != replicas_.end() ? old->channel : makeChannel(a, false)});
+  }
+  replicas_ = std::move(fresh);
+  resolved_at_ = now;
+  return replicas_;
+}
+
+size_t ReplicaPool::lastReplicaCount() const {
+  std::lock_guard lock(mu_);
+  return replicas_.size();
+}
+
+void ReplicaPool::prepare(grpc::ClientContext* context, std::chrono::system_clock::time_point deadline) const {
+  if (!token_.empty()) context->AddMetadata("authorization", "Bearer " + token_);
+  context->set_deadline(deadline);
+}
+
+}  // namespace distband

@@ -1,0 +1,277 @@
+// Scale-out: a coordinator (--peers) in front of three replicas on loopback gives the same field as one server,
+// keeps the stream's nearest-first order, survives a replica killed mid-query, and stops every tile on a cancel.
+// The reference is one replica queried directly (itself checked against exact distances by service_test).
+#include <signal.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "tests/integration/service_fixture.h"
+#include "tests/support/child_server.h"
+
+namespace distband {
+namespace {
+
+ServerOptions coordinatorOptions(const std::vector<std::string>& replicas, uint64_t tile_voxels) {
+  ServerOptions o = TestServer::defaults();
+  o.peers = "ipv4:";
+  for (size_t i = 0; i < replicas.size(); ++i) o.peers += (i ? "," : "") + replicas[i];
+  o.tile_voxels = tile_voxels;
+  return o;
+}
+
+struct Cluster {
+  std::vector<std::unique_ptr<TestServer>> replicas;
+  std::unique_ptr<TestServer> coordinator;
+  explicit Cluster(uint64_t tile_voxels = 32 * 32 * 32) {
+    std::vector<std::string> targets;
+    for (int i = 0; i < 3; ++i) {
+      ServerOptions o = TestServer::defaults();
+      o.compute_threads = 1;
+      replicas.push_back(std::make_unique<TestServer>(o));
+      targets.push_back(replicas.back()->target());
+    }
+    coordinator = std::make_unique<TestServer>(coordinatorOptions(targets, tile_voxels));
+  }
+  size_t tileQueries() {
+    size_t n = 0;
+    for (auto& r : replicas) n += r->records().size();
+    return n;
+  }
+};
+
+struct Comparison {
+  int64_t voxels = 0, identical = 0, sign_flips = 0;
+  double max_diff = 0;  // voxels
+};
+
+Comparison compare(const DenseField& a, const DenseField& b) {
+  Comparison c;
+  const double h = a.grid().voxelSize();
+  for (size_t i = 0; i < a.values().size(); ++i) {
+    const float x = a.values()[i], y = b.values()[i];
+    ++c.voxels;
+    if (std::memcmp(&x, &y, sizeof x) == 0) {
+      ++c.identical;
+      continue;
+    }
+    if ((x < 0) != (y < 0)) ++c.sign_flips;
+    c.max_diff = std::max(c.max_diff, std::abs(double(x) - double(y)) / h);
+  }
+  return c;
+}
+
+void expectWellOrdered(const Streamed& s) {
+  ASSERT_TRUE(s.result.status.ok()) << s.result.status.error_message();
+  EXPECT_EQ(s.order_error, "");
+  ASSERT_FALSE(s.done.empty());
+  for (size_t i = 0; i < s.done.size(); ++i) {
+    EXPECT_EQ(s.done[i].segment(), i);
+    EXPECT_EQ(s.done[i].last(), i + 1 == s.done.size());
+  }
+}
+
+std::vector<Vec3d> randomPoints(int n, double extent, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-0.1 * extent, 1.1 * extent);
+  std::vector<Vec3d> p;
+  for (int i = 0; i < n; ++i) p.push_back({u(rng), u(rng), u(rng)});
+  return p;
+}
+
+TEST(ScaleOutTest, PointFieldsAreBitIdenticalToOneServerAndNearestFirst) {
+  Cluster cluster;
+  const Coord dims{96, 80, 72};
+  const double h = 0.5;
+  const auto points = randomPoints(25, 40.0, 3);
+  for (const auto& [segment, limit] : {std::pair{0.0, 3.0}, std::pair{1.5, 6.0}, std::pair{4.0, 0.0}}) {
+    const v1::QueryRequest request = pointsRequest(points, dims, h, segment, limit);
+    const Streamed one = stream(cluster.replicas[0]->client(), request, -1.0f);
+    const size_t before = cluster.tileQueries();
+    const Streamed many = stream(cluster.coordinator->client(), request, -1.0f);
+    expectWellOrdered(one);
+    expectWellOrdered(many);
+    const size_t tiles = cluster.tileQueries() - before;
+    EXPECT_GT(tiles, 6u) << "the query should have been split into tiles";
+    const Comparison c = compare(*one.field, *many.field);
+    EXPECT_EQ(c.identical, c.voxels) << "segment " << segment << " limit " << limit << ": max diff " << c.max_diff;
+    EXPECT_EQ(many.result.summary.voxels(), one.result.summary.voxels());
+    EXPECT_EQ(many.done.size(), one.done.size());
+    // Every replica took part (round_robin spreads the tiles).
+    for (auto& r : cluster.replicas) EXPECT_GT(r->records().size(), 0u);
+  }
+}
+
+std::vector<uint8_t> blobMask(const Coord& dims) {
+  std::vector<uint8_t> mask(size_t(dims.x) * dims.y * dims.z, 0);
+  const Vec3d centres[3] = {{20, 22, 18}, {50, 40, 30}, {30, 55, 45}};
+  const double radii[3] = {9, 13, 7};
+  for (int z = 0; z < dims.z; ++z)
+    for (int y = 0; y < dims.y; ++y)
+      for (int x = 0; x < dims.x; ++x)
+        for (int b = 0; b < 3; ++b)
+          if ((Vec3d{double(x), double(y), double(z)} - centres[b]).length() <= radii[b])
+            mask[(size_t(z) * dims.y + y) * dims.x + x] = 1;
+  return mask;
+}
+
+void expectClose(const Comparison& c, const char* what) {
+  EXPECT_GE(double(c.identical), 0.9999 * double(c.voxels)) << what << ": " << c.voxels - c.identical << " differ";
+  EXPECT_LE(c.max_diff, 0.05) << what;
+  EXPECT_EQ(c.sign_flips, 0) << what;
+}
+
+TEST(ScaleOutTest, SignedVolumeMatchesOneServer) {
+  Cluster cluster;
+  const Coord dims{72, 70, 64};
+  const auto mask = blobMask(dims);
+  for (double limit : {4.0, 0.0}) {
+    v1::UploadReply up_one, up_many;
+    ASSERT_TRUE(cluster.replicas[0]->client().uploadVolume(dims, mask, "blobs", &up_one).ok());
+    ASSERT_TRUE(cluster.coordinator->client().uploadVolume(dims, mask, "blobs", &up_many).ok());
+    v1::QueryRequest r;
+    r.set_sign(v1::SIGN_MODE_MASK_INSIDE);
+    r.mutable_grid()->set_voxel_size(1.0);
+    r.set_limit(limit);
+    r.set_segment_length(2.0);
+    r.set_asset_id(up_one.asset_id());
+    const Streamed one = stream(cluster.replicas[0]->client(), r, -1.0f);
+    r.set_asset_id(up_many.asset_id());
+    const Streamed many = stream(cluster.coordinator->client(), r, -1.0f);
+    expectWellOrdered(one);
+    expectWellOrdered(many);
+    expectClose(compare(*one.field, *many.field), limit > 0 ? "volume, limit 4" : "volume, no limit");
+  }
+}
+
+TEST(ScaleOutTest, MeshMatchesOneServer) {
+  Cluster cluster(24 * 24 * 24);
+  const std::string bunny = std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/bunny.obj";
+  v1::UploadReply up_one, up_many;
+  ASSERT_TRUE(cluster.replicas[0]->client().uploadMeshFile(bunny, &up_one).ok());
+  ASSERT_TRUE(cluster.coordinator->client().uploadMeshFile(bunny, &up_many).ok());
+  v1::QueryRequest r;
+  r.mutable_grid()->set_resolution(80);
+  r.set_limit(0.0);  // set below in world units
+  // Limit of 4 voxels: the grid is resolved the same way by both (voxel size from the first query's header).
+  r.set_asset_id(up_one.asset_id());
+  const Streamed probe = stream(cluster.replicas[0]->client(), r, 0.0f);
+  ASSERT_TRUE(probe.result.status.ok());
+  const double h = probe.result.header.voxel_size();
+  r.set_limit(4 * h);
+  r.set_segment_length(1.5 * h);
+  const Streamed one = stream(cluster.replicas[0]->client(), r, -1.0f);
+  r.set_asset_id(up_many.asset_id());
+  const Streamed many = stream(cluster.coordinator->client(), r, -1.0f);
+  expectWellOrdered(one);
+  expectWellOrdered(many);
+  EXPECT_EQ(many.result.header.dims().x(), one.result.header.dims().x());
+  expectClose(compare(*one.field, *many.field), "bunny, limit 4 voxels");
+  EXPECT_GT(one.result.summary.voxels(), 10000u);
+}
+
+TEST(ScaleOutTest, AReplicaKilledMidQueryCostsARetryNotTheField) {
+  // Replicas as processes, so one can be SIGKILLed; small tiles and a slow-enough query so the kill lands mid-way.
+  std::vector<std::unique_ptr<ChildServer>> replicas;
+  std::vector<std::string> targets;
+  for (int i = 0; i < 3; ++i) {
+    replicas.push_back(std::make_unique<ChildServer>(DISTBAND_SERVER_BINARY, std::vector<std::string>{
+                                                         "--threads", "1", "--memory-budget", "2G"}));
+    ASSERT_GT(replicas.back()->port(), 0) << replicas.back()->log();
+    targets.push_back(replicas.back()->target());
+  }
+  ServerOptions o = coordinatorOptions(targets, 32 * 32 * 32);
+  o.tiles_in_flight_per_replica = 1;
+  TestServer coordinator(o);
+  const Coord dims{128, 128, 96};
+  const auto points = randomPoints(40, 64.0, 11);
+  const v1::QueryRequest request = pointsRequest(points, dims, 0.5, 1.0, 8.0);
+
+  RemoteClient direct(targets[1]);
+  const Streamed one = stream(direct, request, -1.0f);
+  ASSERT_TRUE(one.result.status.ok());
+  bool killed = false;
+  const Streamed many = stream(coordinator.client(), request, -1.0f, [&](int batches) {
+    if (!killed && batches == 3) {  // the stream is under way: tiles are running on every replica
+      replicas[0]->signal(SIGKILL);
+      killed = true;
+    }
+    return true;
+  });
+  EXPECT_TRUE(killed);
+  expectWellOrdered(many);
+  const Comparison c = compare(*one.field, *many.field);
+  EXPECT_EQ(c.identical, c.voxels) << "max diff " << c.max_diff;
+  ASSERT_TRUE(coordinator.waitRecords(1));
+  EXPECT_GE(coordinator.records().back().tile_retries, 1) << "the killed replica's tiles should have been retried";
+  EXPECT_GT(coordinator.records().back().tiles, 6);
+}
+
+TEST(ScaleOutTest, ATileThatCannotBeComputedAnywhereEndsInUnavailable) {
+  // Replicas that refuse the tiles (a voxel budget below a tile's window) exhaust the retries.
+  std::vector<std::unique_ptr<TestServer>> replicas;
+  std::vector<std::string> targets;
+  for (int i = 0; i < 2; ++i) {
+    ServerOptions o = TestServer::defaults();
+    o.max_voxels_per_query = 1000;
+    replicas.push_back(std::make_unique<TestServer>(o));
+    targets.push_back(replicas.back()->target());
+  }
+  ServerOptions o = coordinatorOptions(targets, 32 * 32 * 32);
+  o.tile_retries = 2;
+  TestServer coordinator(o);
+  const Streamed s = stream(coordinator.client(), pointsRequest({{5, 5, 5}}, {64, 64, 64}, 1.0, 0, 3.0), -1.0f);
+  EXPECT_EQ(s.result.status.error_code(), grpc::StatusCode::UNAVAILABLE) << s.result.status.error_message();
+  EXPECT_NE(s.result.status.error_message().find("after 3 attempts"), std::string::npos)
+      << s.result.status.error_message();
+  EXPECT_NE(s.result.status.error_message().find("voxel budget"), std::string::npos);
+}
+
+TEST(ScaleOutTest, CancelAtTheCoordinatorStopsEveryTileWithin100ms) {
+  Cluster cluster(64 * 64 * 64);
+  // Unlimited point seeds on a large grid: every tile computes for a while.
+  const v1::QueryRequest request = pointsRequest(randomPoints(30, 160.0, 5), {320, 320, 320}, 0.5, 0, 0);
+  QueryCanceller canceller;
+  RemoteQueryOptions options;
+  options.canceller = &canceller;
+  std::thread cancel([&] {
+    // Cancel once tiles are computing on every replica.
+    const auto end = Clock::now() + std::chrono::seconds(20);
+    while (Clock::now() < end) {
+      int busy = 0;
+      for (auto& r : cluster.replicas) busy += r->server().service().activeQueries() > 0;
+      if (busy == 3) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    canceller.cancel();
+  });
+  RemoteQueryCallbacks cb;
+  const RemoteQueryResult r = cluster.coordinator->client().query(request, cb, options);
+  cancel.join();
+  EXPECT_EQ(r.status.error_code(), grpc::StatusCode::CANCELLED);
+  ASSERT_TRUE(cluster.coordinator->waitRecords(1));
+  const auto cancel_time = canceller.cancelTime();
+  // Every tile that was running stopped its engine within 100 ms of the client's cancel.
+  size_t running = 0;
+  for (auto& replica : cluster.replicas) {
+    const auto end = Clock::now() + std::chrono::seconds(5);
+    while (Clock::now() < end && replica->server().service().activeQueries() > 0)
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    for (const QueryRecord& rec : replica->records()) {
+      if (!rec.engine_ran || !rec.interrupted) continue;
+      ++running;
+      const double stop_ms = ms(rec.engine_stopped - cancel_time);
+      EXPECT_LT(stop_ms, 100.0) << "a tile's engine stopped " << stop_ms << " ms after the cancel";
+    }
+  }
+  EXPECT_GE(running, 3u);
+}
+
+}  // namespace
+}  // namespace distband
