@@ -463,6 +463,9 @@ CliCommand registerInfo(CLI::App& app, const CliContext& ctx) {
                 i.max_voxels_per_query(), i.max_upload_bytes(), i.cache_bytes(), i.cache_used_bytes(),
                 i.max_message_bytes(), join(i.stencils()), join(i.modes()), join(i.sign_modes()),
                 join(i.mesh_formats()), join(i.encodings()));
+            if (i.replicas() > 0)
+              ctx.out << fmt::format("coordinator        {} replicas, tiles of at most {} voxels\n", i.replicas(),
+                                     i.tile_voxels());
             return kExitOk;
           }};
 }

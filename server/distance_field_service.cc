@@ -429,6 +429,9 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
       return log(s, "");
   if (Status s = resolveQuery(request, options_, cache_, std::move(inline_mesh), &q); !s.ok()) return log(s, "");
   label = q.seeds_label;
+  if (q.tile)
+    label += fmt::format(" tile window={}x{}x{}@{},{},{}", q.tile->window.dims.x, q.tile->window.dims.y,
+                         q.tile->window.dims.z, q.tile->window.min.x, q.tile->window.min.y, q.tile->window.min.z);
   grid = q.grid;
   limit = q.engine.limit_world;
   segment = q.engine.segment_length_world;

@@ -72,7 +72,7 @@ void addServerFlags(CLI::App& app, ServerOptions* o) {
   // Coordinator: one query over many replicas (docs/scale-out.md).
   app.add_option("--peers", o->peers,
                  "act as a coordinator: split queries into tiles computed by these replicas, a gRPC target "
-                 "(ipv4:HOST:PORT,HOST:PORT,... or dns:///HEADLESS-SERVICE:PORT); uploads are kept here and passed on")
+                 "(ipv4:ADDR:PORT,ADDR:PORT,..., dns:///HEADLESS-SERVICE:PORT, or names NAME:PORT,NAME:PORT,...); uploads are kept here and passed on")
       ->group("Coordinator");
   app.add_option("--tile-voxels", o->tile_voxels, "largest tile; a grid with more voxels is split (whole bricks)")
       ->capture_default_str()

@@ -37,7 +37,19 @@ bool splitHostPort(const std::string& s, std::string* host, std::string* port) {
   return !host->empty() && !port->empty() && std::all_of(port->begin(), port->end(), ::isdigit);
 }
 
+// One round_robin target for single-address targets: gRPC's ipv4:/ipv6: schemes take one family each (IPv4 wins).
+std::string combinedTarget(const std::vector<std::string>& addresses) {
+  std::string v4, v6;
+  for (const std::string& a : addresses) {
+    std::string& list = a.rfind("ipv4:", 0) == 0 ? v4 : v6;
+    list += (list.empty() ? "" : ",") + a.substr(5);
+  }
+  return !v4.empty() ? "ipv4:" + v4 : (!v6.empty() ? "ipv6:" + v6 : "");
+}
+
 }  // namespace
+
+static std::vector<std::string> resolveName(const std::string& name, const std::string& target, std::string* error);
 
 std::vector<std::string> resolveReplicaAddresses(const std::string& target, std::string* error) {
   std::vector<std::string> out;
@@ -47,12 +59,27 @@ std::vector<std::string> resolveReplicaAddresses(const std::string& target, std:
     if (out.empty()) *error = fmt::format("--peers {}: no address after '{}'", target, scheme);
     return out;
   }
-  std::string name = target;
-  if (name.rfind("dns:///", 0) == 0) name = name.substr(7);
-  else if (name.rfind("dns:", 0) == 0) name = name.substr(4);
+  std::vector<std::string> names;
+  if (target.rfind("dns:///", 0) == 0) names = {target.substr(7)};
+  else if (target.rfind("dns:", 0) == 0) names = {target.substr(4)};
+  else names = split(target, ',');
+  if (names.empty()) *error = fmt::format("--peers {}: no replica named", target);
+  for (const std::string& name : names) {
+    std::string one_error;
+    for (std::string& a : resolveName(name, target, &one_error)) out.push_back(std::move(a));
+    if (!one_error.empty()) *error = one_error;  // reported only when nothing resolves
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  if (!out.empty()) error->clear();
+  return out;
+}
+
+static std::vector<std::string> resolveName(const std::string& name, const std::string& target, std::string* error) {
+  std::vector<std::string> out;
   std::string host, port;
   if (!splitHostPort(name, &host, &port)) {
-    *error = fmt::format("--peers {}: expected ipv4:ADDR:PORT,..., dns:///HOST:PORT or HOST:PORT", target);
+    *error = fmt::format("--peers {}: expected ipv4:ADDR:PORT,..., dns:///HOST:PORT or HOST:PORT,HOST:PORT,...", target);
     return out;
   }
   addrinfo hints{};
@@ -74,8 +101,6 @@ std::vector<std::string> resolveReplicaAddresses(const std::string& target, std:
     }
   }
   freeaddrinfo(found);
-  std::sort(out.begin(), out.end());
-  out.erase(std::unique(out.begin(), out.end()), out.end());
   if (out.empty()) *error = fmt::format("--peers {}: {} resolves to no address", target, host);
   return out;
 }
@@ -107,11 +132,19 @@ Status ReplicaPool::create(const ServerOptions& o, std::unique_ptr<ReplicaPool>*
   std::string error;
   if (resolveReplicaAddresses(o.peers, &error).empty() && error.find("expected") != std::string::npos)
     return Status::InvalidArgument(error);  // malformed; a name that does not resolve yet may later (pods starting)
-  const bool dns = o.peers.rfind("ipv4:", 0) != 0 && o.peers.rfind("ipv6:", 0) != 0;
-  pool->balanced_ = pool->makeChannel(dns && o.peers.rfind("dns:", 0) != 0 ? "dns:///" + o.peers : o.peers, true);
-  pool->balanced_stub_ = v1::DistanceField::NewStub(pool->balanced_);
+  pool->name_list_ = o.peers.rfind("ipv4:", 0) != 0 && o.peers.rfind("ipv6:", 0) != 0 && o.peers.rfind("dns:", 0) != 0;
+  if (!pool->name_list_) {
+    pool->balanced_target_ = o.peers;
+    pool->balanced_stub_ = v1::DistanceField::NewStub(pool->makeChannel(o.peers, true));
+  }
   *out = std::move(pool);
   return Status::Ok();
+}
+
+std::shared_ptr<v1::DistanceField::Stub> ReplicaPool::balanced() {
+  if (name_list_) replicas();  // refreshes the channel when the names resolve to other addresses
+  std::lock_guard lock(mu_);
+  return balanced_stub_;
 }
 
 std::shared_ptr<grpc::Channel> ReplicaPool::makeChannel(const std::string& target, bool round_robin) const {
@@ -139,6 +172,15 @@ std::vector<ReplicaPool::Replica> ReplicaPool::replicas() {
   }
   replicas_ = std::move(fresh);
   resolved_at_ = now;
+  if (name_list_) {
+    std::vector<std::string> addresses;
+    for (const Replica& r : replicas_) addresses.push_back(r.address);
+    const std::string target = combinedTarget(addresses);
+    if (target != balanced_target_ && !target.empty()) {
+      balanced_target_ = target;
+      balanced_stub_ = v1::DistanceField::NewStub(makeChannel(target, true));
+    }
+  }
   return replicas_;
 }
 

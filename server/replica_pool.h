@@ -1,10 +1,13 @@
 // ReplicaPool: a coordinator's connections to its replicas (distband-server --peers TARGET).
 // Contract:
-//   * TARGET is a gRPC target naming every replica: "ipv4:10.0.0.1:50051,10.0.0.2:50051", "ipv6:[::1]:5001,...",
-//     "dns:///distband-headless.ns.svc.cluster.local:50051" (a Kubernetes headless Service: one A record per pod)
-//     or "host:port" (same as dns:///host:port).
+//   * TARGET names every replica, either as a gRPC target — "ipv4:10.0.0.1:50051,10.0.0.2:50051",
+//     "ipv6:[::1]:5001,...", "dns:///distband-headless.ns.svc.cluster.local:50051" (a Kubernetes headless Service:
+//     one A record per pod) — or as a list of names, "replica1:50051,replica2:50051,..." (every address each name
+//     resolves to; compose services, fixed hosts), which the pool resolves itself.
 //   * balanced() is one channel over all of them with gRPC's round_robin policy: each tile is one call, so tiles
-//     spread per call; gRPC re-resolves DNS and drops a dead replica from the rotation by itself.
+//     spread per call; a dead replica leaves the rotation by itself. gRPC re-resolves dns: targets; a list of names
+//     is re-resolved by the pool (at most once a second, when replicas() is asked) and the channel rebuilt when the
+//     addresses change.
 //   * replicas() lists one channel per replica address (resolved now, at most every second: for uploads, which must
 //     reach every replica because round_robin decides where each tile runs).
 //   * prepare() adds the call credentials (--peer-token-file) and a deadline to a ClientContext. TLS to the
@@ -36,7 +39,8 @@ class ReplicaPool {
   /// Reads the credential files named by the options (errors name the flag).
   static Status create(const ServerOptions& options, std::unique_ptr<ReplicaPool>* out);
 
-  v1::DistanceField::Stub& balanced() { return *balanced_stub_; }
+  /// The round_robin stub (null while no replica address is known).
+  std::shared_ptr<v1::DistanceField::Stub> balanced();
   /// Every replica the target names now (resolved at most once a second); empty when none resolves.
   std::vector<Replica> replicas();
   /// Replicas found by the last resolution.
@@ -52,15 +56,16 @@ class ReplicaPool {
   std::shared_ptr<grpc::ChannelCredentials> credentials_;
   std::string tls_name_, token_;
   int max_message_bytes_ = 0;
-  std::shared_ptr<grpc::Channel> balanced_;
-  std::unique_ptr<v1::DistanceField::Stub> balanced_stub_;
+  bool name_list_ = false;  ///< TARGET is a list of names resolved here (else a gRPC target)
+  std::string balanced_target_;
+  std::shared_ptr<v1::DistanceField::Stub> balanced_stub_;
   mutable std::mutex mu_;
   std::chrono::steady_clock::time_point resolved_at_{};
   std::vector<Replica> replicas_;
 };
 
 /// The addresses a target names, each as a single-address gRPC target ("ipv4:a:p" / "ipv6:[a]:p"); DNS names are
-/// resolved with getaddrinfo. Empty with `error` set when the target is malformed or does not resolve.
+/// resolved with getaddrinfo. Empty with `error` set when the target is malformed or nothing resolves.
 std::vector<std::string> resolveReplicaAddresses(const std::string& target, std::string* error);
 
 }  // namespace distband

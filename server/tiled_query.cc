@@ -295,8 +295,40 @@ bool hasWork(const v1::QueryRequest& r, bool signed_volume) {
 
 }  // namespace
 
+std::vector<bool> TiledQuery::meshReach() const {
+  // With a limit, a tile no triangle comes within the limit of delivers nothing: its call is skipped (a surface in
+  // a large grid touches few tiles). Each triangle marks the tiles its box, grown by the limit, overlaps.
+  std::vector<bool> reach(tiles_.size(), true);
+  const double limit = query_.engine.limit_world / query_.grid.voxelSize();
+  if (query_.seed_kind != ResolvedQuery::SeedKind::kMesh || !std::isfinite(limit) || tiles_.empty()) return reach;
+  std::fill(reach.begin(), reach.end(), false);
+  // Tiles form a regular lattice (planTiles): the first tile's size is the step, ordered x fastest.
+  const Coord step = tiles_[0].plan.deliver.dims, dims = query_.grid.dims();
+  const Coord count{(dims.x + step.x - 1) / step.x, (dims.y + step.y - 1) / step.y, (dims.z + step.z - 1) / step.z};
+  const TriangleMesh& mesh = *query_.asset->mesh;
+  auto range = [&](double lo, double hi, int s, int n, int* a, int* b) {
+    *a = int(std::clamp(std::floor((lo - limit - 1) / s), 0.0, double(n - 1)));
+    *b = int(std::clamp(std::floor((hi + limit + 1) / s), 0.0, double(n - 1)));
+    return hi + limit + 1 >= 0 && lo - limit - 1 <= double(n) * s;
+  };
+  for (const auto& t : mesh.triangles) {
+    const Vec3d a = query_.grid.indexOf(mesh.vertices[t[0]]), b = query_.grid.indexOf(mesh.vertices[t[1]]),
+                c = query_.grid.indexOf(mesh.vertices[t[2]]);
+    int x0, x1, y0, y1, z0, z1;
+    if (!range(std::min({a.x, b.x, c.x}), std::max({a.x, b.x, c.x}), step.x, count.x, &x0, &x1) ||
+        !range(std::min({a.y, b.y, c.y}), std::max({a.y, b.y, c.y}), step.y, count.y, &y0, &y1) ||
+        !range(std::min({a.z, b.z, c.z}), std::max({a.z, b.z, c.z}), step.z, count.z, &z0, &z1))
+      continue;
+    for (int z = z0; z <= z1; ++z)
+      for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) reach[(size_t(z) * count.y + y) * count.x + x] = true;
+  }
+  return reach;
+}
+
 TiledQuery::Attempt TiledQuery::runTile(size_t index) {
   Attempt attempt;
+  if (!mesh_reach_[index]) return attempt;  // no triangle within the limit: nothing to deliver
   v1::QueryRequest request = tileRequest(tiles_[index]);
   if (!hasWork(request, query_.sign == v1::SIGN_MODE_MASK_INSIDE)) return attempt;  // nothing within the limit
   grpc::ClientContext context;
@@ -309,7 +341,14 @@ TiledQuery::Attempt TiledQuery::runTile(size_t index) {
     }
     calls_.insert(&context);
   }
-  auto reader = config_.pool.balanced().Query(&context, request);
+  const std::shared_ptr<v1::DistanceField::Stub> stub = config_.pool.balanced();
+  if (!stub) {
+    std::lock_guard lock(mu_);
+    calls_.erase(&context);
+    attempt.status = Status::Unavailable(fmt::format("--peers {} resolves to no replica", config_.pool.target()));
+    return attempt;
+  }
+  auto reader = stub->Query(&context, request);
   request.Clear();
   v1::QueryReply message;
   while (reader->Read(&message)) {
@@ -534,6 +573,7 @@ void TiledQuery::run() {
     for (const TilePlan& p : plan(query_, config_.options.tile_voxels)) tiles_.push_back(Tile{p});
     for (size_t i = 0; i < tiles_.size(); ++i) pending_.push_back(i);
   }
+  mesh_reach_ = meshReach();
   if (replicas_ == 0)
     status = Status::Unavailable(fmt::format("--peers {} names no reachable replica", config_.pool.target()));
   if (status.ok()) status = prepareSeeds();

@@ -6,7 +6,7 @@
 //     bricks; without a limit, point seeds still use that margin (the engine is exact for sites outside its grid),
 //     while meshes and volumes need the whole grid in every window (each tile then costs a whole computation).
 //   * Seeds travel as follows: points inline, only those within the limit of the tile (order kept, so ties resolve
-//     as on one server); meshes once per replica as a canonical binary PLY (content-addressed, remembered); volumes
+//     as on one server); a tile no seed comes within the limit of is not sent at all; meshes once per replica as a canonical binary PLY (content-addressed, remembered); volumes
 //     as the window's crop, inline when small, else uploaded to every replica.
 //   * The merged stream keeps the protocol's order: segment s's bricks are forwarded as tiles deliver them, and its
 //     SegmentDone is sent once every tile has finished segment s; what tiles deliver of later segments meanwhile is
@@ -104,6 +104,7 @@ class TiledQuery final : public QueryStream {
   Status uploadToReplicas(const std::string& id, const std::function<Status(v1::DistanceField::Stub&,
                                                                              grpc::ClientContext*)>& upload);
   v1::QueryRequest tileRequest(const Tile& tile) const;
+  std::vector<bool> meshReach() const;
   std::chrono::system_clock::time_point tileDeadline() const;
 
   const ResolvedQuery query_;
@@ -120,6 +121,7 @@ class TiledQuery final : public QueryStream {
   mutable std::mutex mu_;
   std::condition_variable cv_;
   std::vector<Tile> tiles_;
+  std::vector<bool> mesh_reach_;  ///< per tile: whether a triangle comes within the limit (always true otherwise)
   std::vector<size_t> pending_;  ///< tiles waiting for a worker
   size_t running_ = 0, done_tiles_ = 0;
   uint32_t merged_ = 0;  ///< the segment being merged

@@ -1,0 +1,216 @@
+// scale_out_bench: what a coordinator costs, and the per-tile figures the 4096^3 model in docs/scale-out.md uses.
+// In the same run, on the same total compute threads T (--threads, default 2):
+//   * one distband-server with --threads T, queried directly;
+//   * a coordinator (--peers, --tile-voxels) in front of R = T replicas with --threads 1 each;
+// every server a child process on loopback. Each case runs --repeats times alternately; the table gives median wall
+// times (client side: call to summary), their ratio, the tiles and the fields' agreement (bit-identical voxels),
+// the replicas' peak RSS, and per tile: median seconds, voxels computed (window) and delivered.
+// Output: a markdown table on stdout and a JSON file (--json).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "bench/bench_util.h"
+#include "client/remote_client.h"
+#include "core/dense_field.h"
+#include "tests/support/child_server.h"
+
+namespace distband {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Run {
+  double seconds = 0;
+  std::vector<float> field;
+  uint64_t voxels = 0;
+  double first_segment_s = -1;
+};
+
+Run query(RemoteClient& client, const v1::QueryRequest& request) {
+  Run run;
+  std::unique_ptr<DenseField> field;
+  RemoteQueryCallbacks cb;
+  cb.on_header = [&](const Grid& grid, const v1::QueryHeader&) {
+    field = std::make_unique<DenseField>(grid, -1.0f);
+    return true;
+  };
+  cb.on_bricks = [&](SegmentBricks&& batch, uint64_t) {
+    field->add(batch);
+    return true;
+  };
+  const auto t0 = Clock::now();
+  const RemoteQueryResult r = client.query(request, cb);
+  run.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  if (!r.status.ok()) {
+    fmt::print(stderr, "query failed: {}\n", r.status.error_message());
+    std::exit(1);
+  }
+  run.first_segment_s = r.first_segment_done_seconds;
+  run.voxels = r.summary.voxels();
+  run.field = std::move(field->values());
+  return run;
+}
+
+struct Case {
+  std::string name;
+  v1::QueryRequest request;  // seeds set per server (asset ids differ per upload target)
+  std::string mesh_path;
+};
+
+}  // namespace
+}  // namespace distband
+
+int main(int argc, char** argv) {
+  using namespace distband;
+  CLI::App app{"scale_out_bench: a coordinator over replicas vs one server on the same total threads"};
+  int threads = 2, repeats = 3, n = 256;
+  uint64_t tile_voxels = uint64_t(128) * 128 * 128;
+  std::string mesh_dir = std::string(DISTBAND_BENCH_DIR) + "/../tests/data/meshes", json_path, tag = "scale_out";
+  app.add_option("--threads", threads, "total compute threads: one server's --threads, and the replica count");
+  app.add_option("--repeats", repeats, "alternating runs per case (median)");
+  app.add_option("--resolution", n, "grid size N (N^3)");
+  app.add_option("--tile-voxels", tile_voxels, "the coordinator's --tile-voxels");
+  app.add_option("--mesh-dir", mesh_dir, "directory with bunny.obj");
+  app.add_option("--json", json_path, "write the results as JSON here");
+  app.add_option("--tag", tag, "results name: bench/results/TAG.{md,json} when --json is not given");
+  CLI11_PARSE(app, argc, argv);
+  if (json_path.empty()) json_path = std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".json";
+
+  const std::string bin = DISTBAND_SERVER_BIN;
+  ChildServer single(bin, {"--threads", std::to_string(threads), "--memory-budget", "4G"});
+  std::vector<std::unique_ptr<ChildServer>> replicas;
+  std::string peers = "ipv4:";
+  for (int i = 0; i < threads; ++i) {
+    replicas.push_back(std::make_unique<ChildServer>(
+        bin, std::vector<std::string>{"--threads", "1", "--memory-budget", "4G", "--max-queries", "2"}));
+    peers += (i ? "," : "") + replicas.back()->target();
+  }
+  ChildServer coordinator(bin, {"--threads", "1", "--memory-budget", "2G", "--peers", peers, "--tile-voxels",
+                                std::to_string(tile_voxels), "--tiles-in-flight", "1"});
+  if (single.port() == 0 || coordinator.port() == 0) {
+    fmt::print(stderr, "a server did not start\n{}\n{}", single.log(), coordinator.log());
+    return 1;
+  }
+  RemoteClient one(single.target()), many(coordinator.target());
+
+  std::vector<Case> cases;
+  const double h = 1.0 / n;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0.05, 0.95);
+  std::vector<Vec3d> points;
+  for (int i = 0; i < 64; ++i) points.push_back({u(rng), u(rng), u(rng)});
+  auto pointsCase = [&](const std::string& name, double limit_vox, double segment_vox) {
+    Case c{name, {}, ""};
+    for (const Vec3d& p : points) {
+      v1::Vec3* v = c.request.mutable_points()->add_points();
+      v->set_x(p.x);
+      v->set_y(p.y);
+      v->set_z(p.z);
+    }
+    c.request.mutable_grid()->set_voxel_size(h);
+    for (auto* d : {c.request.mutable_grid()->mutable_dims()}) {
+      d->set_x(uint32_t(n));
+      d->set_y(uint32_t(n));
+      d->set_z(uint32_t(n));
+    }
+    c.request.set_limit(limit_vox * h);
+    c.request.set_segment_length(segment_vox * h);
+    return c;
+  };
+  cases.push_back(pointsCase(fmt::format("64 points {}^3, limit 8 vox, segments of 2", n), 8, 2));
+  cases.push_back(pointsCase(fmt::format("64 points {}^3, no limit", n), 0, 0));
+  {
+    Case c{fmt::format("bunny {}, limit 3 vox", n), {}, mesh_dir + "/bunny.obj"};
+    c.request.mutable_grid()->set_resolution(uint32_t(n));
+    cases.push_back(c);
+  }
+
+  nlohmann::json out = nlohmann::json::array();
+  fmt::print("| case | tiles | one server ({} threads) | coordinator + {} replicas x 1 thread | ratio | identical voxels | "
+             "per tile: median s, computed / delivered voxels | replica peak RSS |\n|---|---|---|---|---|---|---|---|\n",
+             threads, threads);
+  for (Case& c : cases) {
+    v1::QueryRequest r_one = c.request, r_many = c.request;
+    if (!c.mesh_path.empty()) {
+      v1::UploadReply up;
+      if (!one.uploadMeshFile(c.mesh_path, &up).ok()) return 1;
+      r_one.set_asset_id(up.asset_id());
+      if (!many.uploadMeshFile(c.mesh_path, &up).ok()) return 1;
+      r_many.set_asset_id(up.asset_id());
+      // Limit 3 voxels: the voxel size follows from the resolution; read it from a header (then cancel).
+      RemoteQueryCallbacks cb;
+      Grid g;
+      cb.on_header = [&](const Grid& grid, const v1::QueryHeader&) {
+        g = grid;
+        return false;
+      };
+      one.query(r_one, cb);
+      r_one.set_limit(3 * g.voxelSize());
+      r_many.set_limit(3 * g.voxelSize());
+    }
+    std::vector<size_t> log_from;
+    for (auto& rep : replicas) log_from.push_back(rep->log().size());
+    std::vector<double> t_one, t_many;
+    Run last_one, last_many;
+    for (int k = 0; k < repeats; ++k) {
+      last_one = query(one, r_one);
+      t_one.push_back(last_one.seconds);
+      last_many = query(many, r_many);
+      t_many.push_back(last_many.seconds);
+    }
+    int64_t identical = 0;
+    for (size_t i = 0; i < last_one.field.size(); ++i)
+      identical += std::memcmp(&last_one.field[i], &last_many.field[i], sizeof(float)) == 0;
+    // Per-tile figures from the replicas' log lines of the coordinator's last run.
+    std::vector<double> tile_s, tile_window, tile_delivered;
+    for (size_t ri = 0; ri < replicas.size(); ++ri) {
+      const std::string log = replicas[ri]->log();
+      size_t pos = log_from[ri];
+      while ((pos = log.find("] Query ", pos)) != std::string::npos) {
+        const size_t end = log.find('\n', pos);
+        const std::string line = log.substr(pos, end - pos);
+        pos = end;
+        const size_t tpos = line.find(" time="), vpos = line.find(" voxels=");
+        if (tpos == std::string::npos || vpos == std::string::npos || line.find("status=OK") == std::string::npos)
+          continue;
+        tile_s.push_back(std::atof(line.c_str() + tpos + 6));
+        tile_delivered.push_back(std::atof(line.c_str() + vpos + 8));
+        int wx = 0, wy = 0, wz = 0;
+        const size_t wpos = line.find("window=");
+        if (wpos != std::string::npos && std::sscanf(line.c_str() + wpos, "window=%dx%dx%d", &wx, &wy, &wz) == 3)
+          tile_window.push_back(double(wx) * wy * wz);
+      }
+    }
+    const double ratio = bench::median(t_many) / bench::median(t_one);
+    const std::string clog = coordinator.log();
+    const size_t tp = clog.rfind("tiles=");
+    const int tiles = tp == std::string::npos ? 0 : std::atoi(clog.c_str() + tp + 6);
+    double rss = 0;
+    for (auto& rep : replicas) rss = std::max(rss, rep->status("VmHWM:") / 1024.0);
+    const double med_tile = tile_s.empty() ? 0 : bench::median(tile_s);
+    const double med_delivered = tile_delivered.empty() ? 0 : bench::median(tile_delivered);
+    const double med_window = tile_window.empty() ? 0 : bench::median(tile_window);
+    fmt::print("| {} | {} | {:.3f} s | {:.3f} s | {:.2f} | {:.4f} % | {:.3f} s, {:.2f} M / {:.2f} M | {:.0f} MiB |\n",
+               c.name, tiles, bench::median(t_one), bench::median(t_many), ratio,
+               100.0 * double(identical) / double(std::max<size_t>(1, last_one.field.size())), med_tile,
+               med_window / 1e6, med_delivered / 1e6, rss);
+    out.push_back({{"case", c.name}, {"threads", threads}, {"tiles", tiles}, {"one_s", t_one}, {"coordinator_s", t_many},
+                   {"ratio_of_medians", ratio}, {"identical_fraction", double(identical) / double(last_one.field.size())},
+                   {"tile_median_s", med_tile}, {"tile_median_delivered_voxels", med_delivered},
+                   {"tile_median_window_voxels", med_window},
+                   {"replica_peak_rss_mib", rss}, {"voxels", last_one.voxels}});
+  }
+  std::ofstream(json_path) << out.dump(2) << "\n";
+  fmt::print("\n(threads {}, repeats {}, tile voxels {}; JSON: {})\n", threads, repeats, tile_voxels, json_path);
+  return 0;
+}
