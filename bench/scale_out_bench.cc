@@ -36,16 +36,18 @@ struct Run {
   double first_segment_s = -1;
 };
 
-Run query(RemoteClient& client, const v1::QueryRequest& request) {
+// Timed runs only receive (keep_field = false): assembling a dense N^3 field in the client would add the same
+// fixed cost to both sides. One more run each assembles the fields to compare them.
+Run query(RemoteClient& client, const v1::QueryRequest& request, bool keep_field) {
   Run run;
   std::unique_ptr<DenseField> field;
   RemoteQueryCallbacks cb;
   cb.on_header = [&](const Grid& grid, const v1::QueryHeader&) {
-    field = std::make_unique<DenseField>(grid, -1.0f);
+    if (keep_field) field = std::make_unique<DenseField>(grid, -1.0f);
     return true;
   };
   cb.on_bricks = [&](SegmentBricks&& batch, uint64_t) {
-    field->add(batch);
+    if (field) field->add(batch);
     return true;
   };
   const auto t0 = Clock::now();
@@ -57,7 +59,7 @@ Run query(RemoteClient& client, const v1::QueryRequest& request) {
   }
   run.first_segment_s = r.first_segment_done_seconds;
   run.voxels = r.summary.voxels();
-  run.field = std::move(field->values());
+  if (field) run.field = std::move(field->values());
   return run;
 }
 
@@ -84,7 +86,16 @@ int main(int argc, char** argv) {
   app.add_option("--json", json_path, "write the results as JSON here");
   app.add_option("--tag", tag, "results name: bench/results/TAG.{md,json} when --json is not given");
   CLI11_PARSE(app, argc, argv);
-  if (json_path.empty()) json_path = std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".json";
+  std::string md_path;
+  if (json_path.empty()) {
+    json_path = std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".json";
+    md_path = std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md";
+  }
+  std::string table;
+  auto emit = [&](const std::string& line) {
+    fmt::print("{}", line);
+    table += line;
+  };
 
   const std::string bin = DISTBAND_SERVER_BIN;
   ChildServer single(bin, {"--threads", std::to_string(threads), "--memory-budget", "4G"});
@@ -136,9 +147,10 @@ int main(int argc, char** argv) {
   }
 
   nlohmann::json out = nlohmann::json::array();
-  fmt::print("| case | tiles | one server ({} threads) | coordinator + {} replicas x 1 thread | ratio | identical voxels | "
-             "per tile: median s, computed / delivered voxels | replica peak RSS |\n|---|---|---|---|---|---|---|---|\n",
-             threads, threads);
+  emit(fmt::format("| case | tiles sent / planned | one server ({} threads) | coordinator + {} replicas x 1 thread | ratio "
+                   "| identical voxels | per tile: median s, computed / delivered voxels | tile-seconds per run | "
+                   "replica peak RSS |\n|---|---|---|---|---|---|---|---|---|\n",
+                   threads, threads));
   for (Case& c : cases) {
     v1::QueryRequest r_one = c.request, r_many = c.request;
     if (!c.mesh_path.empty()) {
@@ -158,23 +170,22 @@ int main(int argc, char** argv) {
       r_one.set_limit(3 * g.voxelSize());
       r_many.set_limit(3 * g.voxelSize());
     }
-    std::vector<size_t> log_from;
+    std::vector<size_t> log_from, log_to;  // the replicas' log lines of the timed runs
     for (auto& rep : replicas) log_from.push_back(rep->log().size());
     std::vector<double> t_one, t_many;
-    Run last_one, last_many;
     for (int k = 0; k < repeats; ++k) {
-      last_one = query(one, r_one);
-      t_one.push_back(last_one.seconds);
-      last_many = query(many, r_many);
-      t_many.push_back(last_many.seconds);
+      t_one.push_back(query(one, r_one, false).seconds);
+      t_many.push_back(query(many, r_many, false).seconds);
     }
+    for (size_t ri = 0; ri < replicas.size(); ++ri) log_to.push_back(replicas[ri]->log().size());
+    const Run last_one = query(one, r_one, true), last_many = query(many, r_many, true);
     int64_t identical = 0;
     for (size_t i = 0; i < last_one.field.size(); ++i)
       identical += std::memcmp(&last_one.field[i], &last_many.field[i], sizeof(float)) == 0;
     // Per-tile figures from the replicas' log lines of the coordinator's last run.
     std::vector<double> tile_s, tile_window, tile_delivered;
     for (size_t ri = 0; ri < replicas.size(); ++ri) {
-      const std::string log = replicas[ri]->log();
+      const std::string log = replicas[ri]->log().substr(0, log_to[ri]);
       size_t pos = log_from[ri];
       while ((pos = log.find("] Query ", pos)) != std::string::npos) {
         const size_t end = log.find('\n', pos);
@@ -200,17 +211,27 @@ int main(int argc, char** argv) {
     const double med_tile = tile_s.empty() ? 0 : bench::median(tile_s);
     const double med_delivered = tile_delivered.empty() ? 0 : bench::median(tile_delivered);
     const double med_window = tile_window.empty() ? 0 : bench::median(tile_window);
-    fmt::print("| {} | {} | {:.3f} s | {:.3f} s | {:.2f} | {:.4f} % | {:.3f} s, {:.2f} M / {:.2f} M | {:.0f} MiB |\n",
-               c.name, tiles, bench::median(t_one), bench::median(t_many), ratio,
-               100.0 * double(identical) / double(std::max<size_t>(1, last_one.field.size())), med_tile,
-               med_window / 1e6, med_delivered / 1e6, rss);
+    double tile_seconds = 0;
+    for (double t : tile_s) tile_seconds += t;
+    tile_seconds /= repeats;
+    const double sent = double(tile_s.size()) / repeats;
+    emit(fmt::format("| {} | {:.0f} / {} | {:.3f} s | {:.3f} s | {:.2f} | {:.4f} % | {:.3f} s, {:.2f} M / {:.3f} M | {:.2f} s "
+                     "| {:.0f} MiB |\n",
+                     c.name, sent, tiles, bench::median(t_one), bench::median(t_many), ratio,
+                     100.0 * double(identical) / double(std::max<size_t>(1, last_one.field.size())), med_tile,
+                     med_window / 1e6, med_delivered / 1e6, tile_seconds, rss));
     out.push_back({{"case", c.name}, {"threads", threads}, {"tiles", tiles}, {"one_s", t_one}, {"coordinator_s", t_many},
                    {"ratio_of_medians", ratio}, {"identical_fraction", double(identical) / double(last_one.field.size())},
                    {"tile_median_s", med_tile}, {"tile_median_delivered_voxels", med_delivered},
                    {"tile_median_window_voxels", med_window},
-                   {"replica_peak_rss_mib", rss}, {"voxels", last_one.voxels}});
+                   {"replica_peak_rss_mib", rss}, {"voxels", last_one.voxels},
+                   {"tiles_sent_per_run", sent}, {"tile_seconds_per_run", tile_seconds}});
   }
   std::ofstream(json_path) << out.dump(2) << "\n";
-  fmt::print("\n(threads {}, repeats {}, tile voxels {}; JSON: {})\n", threads, repeats, tile_voxels, json_path);
+  emit(fmt::format("\nthreads {}, repeats {} (medians; ratio = coordinator / one server), tile voxels {}, resolution {}. "
+                   "Per tile: replica-side handler seconds on 1 thread; tile-seconds: their sum per query.\n",
+                   threads, repeats, tile_voxels, n));
+  if (!md_path.empty()) std::ofstream(md_path) << table;
+  fmt::print("(JSON: {})\n", json_path);
   return 0;
 }

@@ -157,7 +157,11 @@ std::shared_ptr<grpc::Channel> ReplicaPool::makeChannel(const std::string& targe
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 200);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
   args.SetInt(GRPC_ARG_DNS_MIN_TIME_BETWEEN_RESOLUTIONS_MS, 1000);
-  return grpc::CreateCustomChannel(target, credentials_, args);
+  auto channel = grpc::CreateCustomChannel(target, credentials_, args);
+  // Connect now, not on the first tile: round_robin spreads calls over the replicas that are READY, so a query that
+  // arrives while connections are still being made would put its first tiles on whichever replica answered first.
+  channel->GetState(true);
+  return channel;
 }
 
 std::vector<ReplicaPool::Replica> ReplicaPool::replicas() {

@@ -123,7 +123,7 @@ TEST(ScaleOutTest, ReplicasNamedHostPortAreResolvedByTheCoordinator) {
   ASSERT_TRUE(coordinator.client().info(&info).ok());
   EXPECT_EQ(info.replicas(), 3u);
   EXPECT_EQ(info.tile_voxels(), 32u * 32 * 32);
-  const v1::QueryRequest request = pointsRequest(randomPoints(30, 30.0, 9), {64, 64, 64}, 0.5, 1.0, 3.0);
+  const v1::QueryRequest request = pointsRequest(randomPoints(60, 48.0, 9), {96, 96, 96}, 0.5, 1.0, 3.0);
   const Streamed one = stream(replicas[0]->client(), request, -1.0f);
   const Streamed many = stream(coordinator.client(), request, -1.0f);
   expectWellOrdered(many);
@@ -169,6 +169,8 @@ std::vector<uint8_t> blobMask(const Coord& dims) {
 }
 
 void expectClose(const Comparison& c, const char* what) {
+  std::printf("%s: %lld of %lld voxels identical, max difference %.4f voxel, %lld sign differences\n", what,
+              (long long)c.identical, (long long)c.voxels, c.max_diff, (long long)c.sign_flips);
   EXPECT_GE(double(c.identical), 0.9999 * double(c.voxels)) << what << ": " << c.voxels - c.identical << " differ";
   EXPECT_LE(c.max_diff, 0.05) << what;
   EXPECT_EQ(c.sign_flips, 0) << what;
@@ -307,6 +309,7 @@ TEST(ScaleOutTest, CancelAtTheCoordinatorStopsEveryTileWithin100ms) {
   const auto cancel_time = canceller.cancelTime();
   // Every tile that was running stopped its engine within 100 ms of the client's cancel.
   size_t running = 0;
+  double worst_ms = 0;
   for (auto& replica : cluster.replicas) {
     const auto end = Clock::now() + std::chrono::seconds(5);
     while (Clock::now() < end && replica->server().service().activeQueries() > 0)
@@ -316,9 +319,12 @@ TEST(ScaleOutTest, CancelAtTheCoordinatorStopsEveryTileWithin100ms) {
       ++running;
       const double stop_ms = ms(rec.engine_stopped - cancel_time);
       EXPECT_LT(stop_ms, 100.0) << "a tile's engine stopped " << stop_ms << " ms after the cancel";
+      worst_ms = std::max(worst_ms, stop_ms);
     }
   }
   EXPECT_GE(running, 3u);
+  std::printf("cancel at the coordinator: %zu running tiles, the last engine stopped %.1f ms after the client's cancel\n",
+              running, worst_ms);
 }
 
 }  // namespace
