@@ -341,7 +341,22 @@ TiledQuery::Attempt TiledQuery::runTile(size_t index) {
     }
     calls_.insert(&context);
   }
-  const std::shared_ptr<v1::DistanceField::Stub> stub = config_.pool.balanced();
+  // First attempts go where round_robin sends them; a retry goes to a replica this tile has not failed on.
+  std::shared_ptr<v1::DistanceField::Stub> stub;
+  std::set<std::string> avoid;
+  int attempts;
+  {
+    std::lock_guard lock(mu_);
+    avoid = tiles_[index].failed_on;
+    attempts = tiles_[index].attempts;
+  }
+  if (!avoid.empty()) {
+    std::vector<ReplicaPool::Replica> others;
+    for (ReplicaPool::Replica& r : config_.pool.replicas())
+      if (!avoid.count(r.address)) others.push_back(std::move(r));
+    if (!others.empty()) stub = v1::DistanceField::NewStub(others[(index + size_t(attempts)) % others.size()].channel);
+  }
+  if (!stub) stub = config_.pool.balanced();
   if (!stub) {
     std::lock_guard lock(mu_);
     calls_.erase(&context);
@@ -360,6 +375,7 @@ TiledQuery::Attempt TiledQuery::runTile(size_t index) {
     onMessage(index, message);
   }
   const grpc::Status s = reader->Finish();
+  attempt.peer = context.peer();
   std::lock_guard lock(mu_);
   calls_.erase(&context);
   attempt.status = fromGrpcStatus(s);
@@ -547,11 +563,12 @@ void TiledQuery::worker() {
       t.finished = false;
       t.completed = std::min(t.completed, merged_ + 1);
       t.segments.resize(t.completed);
+      if (!a.peer.empty()) t.failed_on.insert(a.peer);
       if (retriable(a.status.code()) && t.attempts < config_.options.tile_retries) {
         ++t.attempts;
         ++retries_;
-        spdlog::warn("coordinator: tile {} attempt {} failed ({} {}); retrying", index, t.attempts,
-                     Status::codeName(a.status.code()), a.status.message());
+        spdlog::warn("coordinator: tile {} attempt {} failed on {} ({} {}); retrying", index, t.attempts,
+                     a.peer.empty() ? "?" : a.peer, Status::codeName(a.status.code()), a.status.message());
         pending_.push_back(index);
       } else {
         const VoxelBox& b = t.plan.deliver;

@@ -13,7 +13,8 @@
 //     held (at most --tile-buffer-bytes, else RESOURCE_EXHAUSTED). Tiles are brick-aligned, so no brick straddles
 //     two tiles and every voxel is delivered once.
 //   * Faults: a tile that fails (replica gone, busy, its --tile-timeout passed, asset missing) is retried, after a
-//     short back-off, up to --tile-retries times; gRPC's round_robin has by then dropped a dead replica. What a
+//     short back-off, up to --tile-retries times, on a replica it has not failed on (a stalled replica still looks
+//     connected to round_robin, so retries pick their replica themselves). What a
 //     failed attempt had forwarded is not sent twice (bricks already forwarded are skipped in the replay), and
 //     replicas compute deterministically, so the field is the same. Beyond the retries: UNAVAILABLE naming the tile
 //     and the last error.
@@ -85,10 +86,12 @@ class TiledQuery final : public QueryStream {
     std::unordered_set<uint64_t> forwarded;  ///< brick origins of the merged segment already sent
     std::vector<v1::SegmentDone> segments;   ///< its SegmentDone per finished segment
     v1::QuerySummary summary;
+    std::set<std::string> failed_on;         ///< replicas (peer addresses) an attempt failed on
   };
   struct Attempt {
     Status status;
     bool asset_missing = false;
+    std::string peer;  ///< the replica it ran on (as gRPC names it, e.g. "ipv4:10.0.0.1:50051")
   };
 
   void run();

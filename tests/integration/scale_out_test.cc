@@ -262,6 +262,43 @@ TEST(ScaleOutTest, AReplicaKilledMidQueryCostsARetryNotTheField) {
   EXPECT_GT(coordinator.records().back().tiles, 6);
 }
 
+TEST(ScaleOutTest, AStalledReplicaIsNotWaitedOnPastTheTileTimeout) {
+  // A replica that accepts calls and never answers (SIGSTOP: its connections stay up, so round_robin keeps it).
+  std::vector<std::unique_ptr<ChildServer>> replicas;
+  std::vector<std::string> targets;
+  for (int i = 0; i < 3; ++i) {
+    replicas.push_back(std::make_unique<ChildServer>(DISTBAND_SERVER_BINARY, std::vector<std::string>{
+                                                         "--threads", "1", "--memory-budget", "2G"}));
+    ASSERT_GT(replicas.back()->port(), 0) << replicas.back()->log();
+    targets.push_back(replicas.back()->target());
+  }
+  ServerOptions o = coordinatorOptions(targets, 32 * 32 * 32);
+  o.tile_timeout_seconds = 1.0;
+  TestServer coordinator(o);
+  const v1::QueryRequest request = pointsRequest(randomPoints(40, 48.0, 13), {96, 96, 96}, 0.5, 1.0, 4.0);
+  RemoteClient direct(targets[1]);
+  const Streamed one = stream(direct, request, -1.0f);
+  ASSERT_TRUE(one.result.status.ok());
+  {  // the coordinator has connected to every replica before one of them stalls
+    v1::ServerInfo info;
+    ASSERT_TRUE(coordinator.client().info(&info).ok());
+  }
+  replicas[2]->signal(SIGSTOP);
+  const auto t0 = Clock::now();
+  const Streamed many = stream(coordinator.client(), request, -1.0f);
+  const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  replicas[2]->signal(SIGCONT);
+  expectWellOrdered(many);
+  const Comparison c = compare(*one.field, *many.field);
+  EXPECT_EQ(c.identical, c.voxels);
+  ASSERT_TRUE(coordinator.waitRecords(1));
+  EXPECT_GE(coordinator.records().back().tile_retries, 1);
+  // Each stalled tile costs one tile timeout (1 s) before its retry elsewhere, not the query's whole life.
+  EXPECT_LT(seconds, 8.0);
+  std::printf("a stalled replica: %d tiles retried elsewhere, the query took %.2f s (tile timeout 1 s)\n",
+              coordinator.records().back().tile_retries, seconds);
+}
+
 TEST(ScaleOutTest, ATileThatCannotBeComputedAnywhereEndsInUnavailable) {
   // Replicas that refuse the tiles (a voxel budget below a tile's window) exhaust the retries.
   std::vector<std::unique_ptr<TestServer>> replicas;
