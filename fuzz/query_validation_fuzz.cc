@@ -1,6 +1,7 @@
 // Fuzz target: request validation (server/request_validation.h) on arbitrary bytes read as a QueryRequest, the way
 // the server sees a hostile client's request. The cache holds a small mesh and a small volume so that asset ids
-// resolve. Validation must never crash, and an accepted request must be within the server's limits.
+// resolve. Validation must never crash, and an accepted request must be within the server's limits (a tile's window
+// within the grid and the budget).
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -44,9 +45,16 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     return 0;
   distband::ResolvedQuery q;
   if (!distband::resolveQuery(request, f->options, f->cache, inline_mesh, &q).ok()) return 0;
-  if (uint64_t(q.grid.voxelCount()) > f->options.max_voxels_per_query) __builtin_trap();
-  if (!q.grid.validate().empty()) __builtin_trap();
-  if (q.touched_voxels_bound > uint64_t(q.grid.voxelCount())) __builtin_trap();
+  // The budget bounds what is computed: the whole grid, or a tile's window.
+  const distband::Grid computed = q.engineGrid();
+  if (uint64_t(computed.voxelCount()) > f->options.max_voxels_per_query) __builtin_trap();
+  if (!q.grid.validate().empty() || !computed.validate().empty()) __builtin_trap();
+  if (q.touched_voxels_bound > uint64_t(computed.voxelCount())) __builtin_trap();
+  if (q.tile) {
+    const distband::VoxelBox whole{{}, q.grid.dims()};
+    if (!whole.contains(q.tile->window) || !q.tile->window.contains(q.tile->deliver)) __builtin_trap();
+    if (q.tile->window.min.x % 8 || q.tile->window.min.y % 8 || q.tile->window.min.z % 8) __builtin_trap();
+  }
   distband::v1::QueryHeader header;
   distband::fillQueryHeader(q, "q", &header);
   return 0;

@@ -421,6 +421,10 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
 
   // Validation (and, for an inline mesh, its parse under admission) before any other work.
   std::shared_ptr<const Asset> inline_mesh;
+  if (pool_ && request.has_tile())
+    return log(Status::InvalidArgument("tile: this server is a coordinator and makes its own tiles; send tiles to a "
+                                       "replica, or the whole query here"),
+               "");
   if (Status s = checkInlineMesh(request, options_); !s.ok()) return log(s, "");
   if (request.seeds_case() == v1::QueryRequest::kMesh)
     if (Status s = parseMeshAdmitted(context, call, request.mesh().data(), request.mesh().format(), "inline mesh",

@@ -155,6 +155,62 @@ TEST(ScaleOutTest, PeerTargetsResolveToEveryReplica) {
   EXPECT_NE(s.error_message().find("--peers"), std::string::npos);
 }
 
+void setBox(v1::VoxelBox* b, int x, int y, int z, int sx, int sy, int sz) {
+  b->set_min_x(x), b->set_min_y(y), b->set_min_z(z);
+  b->set_size_x(sx), b->set_size_y(sy), b->set_size_z(sz);
+}
+
+TEST(ScaleOutTest, TileRequestsAreValidatedFieldByField) {
+  TestServer server;
+  auto check = [&](const v1::QueryRequest& r, grpc::StatusCode code, const std::string& words) {
+    const Streamed s = stream(server.client(), r, -1.0f);
+    EXPECT_EQ(s.result.status.error_code(), code) << s.result.status.error_message();
+    EXPECT_NE(s.result.status.error_message().find(words), std::string::npos) << s.result.status.error_message();
+  };
+  v1::QueryRequest r = pointsRequest({{5, 5, 5}}, {64, 64, 60}, 1.0, 0, 3.0);
+  setBox(r.mutable_tile()->mutable_window(), 0, 0, 0, 32, 32, 32);
+  setBox(r.mutable_tile()->mutable_deliver(), 4, 0, 0, 8, 8, 8);
+  check(r, grpc::StatusCode::INVALID_ARGUMENT, "tile.deliver.min_x must be a multiple of 8");
+  setBox(r.mutable_tile()->mutable_deliver(), 0, 0, 0, 8, 8, 7);
+  check(r, grpc::StatusCode::INVALID_ARGUMENT, "tile.deliver: min_z + size_z must be a multiple of 8 or the grid's extent");
+  setBox(r.mutable_tile()->mutable_deliver(), 32, 0, 0, 8, 8, 8);
+  check(r, grpc::StatusCode::INVALID_ARGUMENT, "tile.deliver must lie inside tile.window");
+  setBox(r.mutable_tile()->mutable_window(), 0, 0, 40, 64, 64, 24);
+  check(r, grpc::StatusCode::INVALID_ARGUMENT, "tile.window: min_z + size_z must lie in [1, grid dims.z = 60]");
+  // The budget applies to the window: a huge grid whose window is small is fine, a window beyond it is not.
+  ServerOptions small = TestServer::defaults();
+  small.max_voxels_per_query = 40000;
+  TestServer budget(small);
+  v1::QueryRequest big = pointsRequest({{5, 5, 5}}, {4096, 4096, 4096}, 1.0, 0, 3.0);
+  setBox(big.mutable_tile()->mutable_window(), 0, 0, 0, 32, 32, 32);
+  setBox(big.mutable_tile()->mutable_deliver(), 0, 0, 0, 16, 16, 16);
+  RemoteQueryCallbacks count_only;  // no dense field: the whole grid is 4096^3
+  const RemoteQueryResult ok = budget.client().query(big, count_only);
+  ASSERT_TRUE(ok.status.ok()) << ok.status.error_message();
+  EXPECT_EQ(ok.header.dims().x(), 4096u);  // the header describes the whole grid
+  EXPECT_GT(ok.summary.voxels(), 0u);
+  setBox(big.mutable_tile()->mutable_window(), 0, 0, 0, 48, 48, 48);
+  const RemoteQueryResult over = budget.client().query(big, count_only);
+  EXPECT_EQ(over.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(over.status.error_message().find("tile.window"), std::string::npos);
+  // Volume seeds of a tile cover its window.
+  v1::QueryRequest vol;
+  vol.mutable_volume()->mutable_dims()->set_x(16), vol.mutable_volume()->mutable_dims()->set_y(16);
+  vol.mutable_volume()->mutable_dims()->set_z(16);
+  vol.mutable_volume()->set_mask(std::string(16 * 16 * 16, '\1'));
+  vol.mutable_grid()->set_voxel_size(1.0);
+  vol.mutable_grid()->mutable_dims()->set_x(64), vol.mutable_grid()->mutable_dims()->set_y(64);
+  vol.mutable_grid()->mutable_dims()->set_z(64);
+  setBox(vol.mutable_tile()->mutable_window(), 0, 0, 0, 32, 32, 32);
+  setBox(vol.mutable_tile()->mutable_deliver(), 0, 0, 0, 16, 16, 16);
+  check(vol, grpc::StatusCode::INVALID_ARGUMENT, "a tile's volume covers its window: dims must be 32x32x32");
+  // A coordinator makes its own tiles.
+  Cluster cluster;
+  const Streamed refused = stream(cluster.coordinator->client(), r, -1.0f);
+  EXPECT_EQ(refused.result.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(refused.result.status.error_message().find("coordinator"), std::string::npos);
+}
+
 std::vector<uint8_t> blobMask(const Coord& dims) {
   std::vector<uint8_t> mask(size_t(dims.x) * dims.y * dims.z, 0);
   const Vec3d centres[3] = {{20, 22, 18}, {50, 40, 30}, {30, 55, 45}};
