@@ -281,16 +281,25 @@ TEST(ScaleOutTest, MeshMatchesOneServer) {
   EXPECT_GT(one.result.summary.voxels(), 10000u);
 }
 
+/// Replicas as processes (so they can be killed or stopped), 1 thread each.
+bool startChildReplicas(int n, std::vector<std::unique_ptr<ChildServer>>* replicas, std::vector<std::string>* targets) {
+  for (int i = 0; i < n; ++i) {
+    replicas->push_back(std::make_unique<ChildServer>(DISTBAND_SERVER_BINARY, std::vector<std::string>{
+                                                          "--threads", "1", "--memory-budget", "2G"}));
+    if (replicas->back()->port() == 0) {
+      ADD_FAILURE() << replicas->back()->log();
+      return false;
+    }
+    targets->push_back(replicas->back()->target());
+  }
+  return true;
+}
+
 TEST(ScaleOutTest, AReplicaKilledMidQueryCostsARetryNotTheField) {
   // Replicas as processes, so one can be SIGKILLed; small tiles and a slow-enough query so the kill lands mid-way.
   std::vector<std::unique_ptr<ChildServer>> replicas;
   std::vector<std::string> targets;
-  for (int i = 0; i < 3; ++i) {
-    replicas.push_back(std::make_unique<ChildServer>(DISTBAND_SERVER_BINARY, std::vector<std::string>{
-                                                         "--threads", "1", "--memory-budget", "2G"}));
-    ASSERT_GT(replicas.back()->port(), 0) << replicas.back()->log();
-    targets.push_back(replicas.back()->target());
-  }
+  ASSERT_TRUE(startChildReplicas(3, &replicas, &targets));
   ServerOptions o = coordinatorOptions(targets, 32 * 32 * 32);
   o.tiles_in_flight_per_replica = 1;
   TestServer coordinator(o);
@@ -322,12 +331,7 @@ TEST(ScaleOutTest, AStalledReplicaIsNotWaitedOnPastTheTileTimeout) {
   // A replica that accepts calls and never answers (SIGSTOP: its connections stay up, so round_robin keeps it).
   std::vector<std::unique_ptr<ChildServer>> replicas;
   std::vector<std::string> targets;
-  for (int i = 0; i < 3; ++i) {
-    replicas.push_back(std::make_unique<ChildServer>(DISTBAND_SERVER_BINARY, std::vector<std::string>{
-                                                         "--threads", "1", "--memory-budget", "2G"}));
-    ASSERT_GT(replicas.back()->port(), 0) << replicas.back()->log();
-    targets.push_back(replicas.back()->target());
-  }
+  ASSERT_TRUE(startChildReplicas(3, &replicas, &targets));
   ServerOptions o = coordinatorOptions(targets, 32 * 32 * 32);
   o.tile_timeout_seconds = 1.0;
   TestServer coordinator(o);
