@@ -8,6 +8,8 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "core/io/temp_file.h"
+
 namespace distband {
 
 std::string fieldMetadataJson(const FieldMetadata& m) {
@@ -39,12 +41,13 @@ std::string fieldMetadataJson(const FieldMetadata& m) {
 
 std::string writeFieldMetadata(const std::string& path, const FieldMetadata& meta) {
   const std::string text = fieldMetadataJson(meta);
-  std::ofstream f(path, std::ios::trunc);
-  if (!f) return fmt::format("{}: cannot open for writing: {}", path, std::strerror(errno));
-  f << text;
-  f.close();
-  if (!f) return fmt::format("{}: write failed: {}", path, std::strerror(errno));
-  return {};
+  std::string tmp;  // atomic, like every output writer: a temporary beside the target, renamed over it
+  std::FILE* f = nullptr;
+  if (std::string e = openTempBeside(path, "w", &tmp, &f); !e.empty()) return e;
+  std::string err;
+  if (std::fwrite(text.data(), 1, text.size(), f) != text.size())
+    err = fmt::format("{}: write failed: {}", path, std::strerror(errno));
+  return commitTemp(f, tmp, path, err);
 }
 
 }  // namespace distband

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "core/grid.h"
+#include "core/io/temp_file.h"
 
 namespace distband {
 namespace {
@@ -199,13 +200,15 @@ std::string writeNpyFile(const std::string& path, std::string_view descr, const 
                          size_t bytes) {
   const std::vector<int64_t> shape{dims.z, dims.y, dims.x};
   std::string header = encodeNpy(descr, shape, nullptr, 0);
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  if (!f) return fmt::format("{}: cannot open for writing: {}", path, std::strerror(errno));
-  f.write(header.data(), static_cast<std::streamsize>(header.size()));
-  f.write(static_cast<const char*>(data), static_cast<std::streamsize>(bytes));
-  f.close();
-  if (!f) return fmt::format("{}: write failed: {}", path, std::strerror(errno));
-  return {};
+  // Atomic: a temporary beside the target renamed over it, so an interrupted write never leaves a truncated array.
+  std::string tmp;
+  std::FILE* f = nullptr;
+  if (std::string e = openTempBeside(path, "wb", &tmp, &f); !e.empty()) return e;
+  std::string err;
+  if (std::fwrite(header.data(), 1, header.size(), f) != header.size() ||
+      std::fwrite(data, 1, bytes, f) != bytes)
+    err = fmt::format("{}: write failed: {}", path, std::strerror(errno));
+  return commitTemp(f, tmp, path, err);
 }
 
 /// "" when the data after the header is exactly what the shape and dtype need, otherwise what is wrong.

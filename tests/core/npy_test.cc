@@ -2,9 +2,14 @@
 // untrusted .npy file can be malformed.
 #include "core/io/npy.h"
 
+#include <unistd.h>
+
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -150,6 +155,35 @@ TEST(NpyTest, Float32RoundTrip) {
 TEST(NpyTest, WriteToAnUnwritablePathFails) {
   const std::string err = writeNpyFloat32("/nonexistent-dir/x/field.npy", std::vector<float>(1), {1, 1, 1});
   EXPECT_NE(err.find("/nonexistent-dir/x/field.npy"), std::string::npos) << err;
+}
+
+TEST(NpyTest, WritesAreAtomicAndLeaveNoTemporaryBehind) {
+  // A fresh directory: after writes (and a failed one), it holds exactly the targets, no "*.tmp-*" file.
+  const std::string dir = ::testing::TempDir() + "npy_atomic_" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string npy = dir + "/field.npy", json = dir + "/field.json";
+  ASSERT_EQ(writeNpyFloat32(npy, std::vector<float>(8, 1.0f), {2, 2, 2}), "");
+  // A reader holding the old file keeps seeing a whole array while the next write replaces it (rename, not truncate).
+  std::ifstream old(npy, std::ios::binary);
+  ASSERT_EQ(writeNpyFloat32(npy, std::vector<float>(27, 2.0f), {3, 3, 3}), "");
+  const std::string old_bytes((std::istreambuf_iterator<char>(old)), std::istreambuf_iterator<char>());
+  NpyArray a;
+  ASSERT_EQ(parseNpy(old_bytes, "old", &a), "");
+  EXPECT_EQ(a.shape, (std::vector<int64_t>{2, 2, 2}));
+  std::vector<float> back;
+  Coord d;
+  ASSERT_EQ(readNpyFloat32(npy, &back, &d), "");
+  EXPECT_EQ(d, (Coord{3, 3, 3}));
+  FieldMetadata meta;
+  meta.grid = Grid({}, 1.0, {3, 3, 3});
+  ASSERT_EQ(writeFieldMetadata(json, meta), "");
+  EXPECT_NE(writeNpyFloat32(npy, std::vector<float>(5), {3, 3, 3}), "");  // refused: size mismatch
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"field.json", "field.npy"}));
+  std::filesystem::remove_all(dir);
 }
 
 struct Malformed {
