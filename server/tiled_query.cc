@@ -15,6 +15,7 @@ namespace distband {
 namespace {
 
 constexpr size_t kUploadChunkBytes = size_t(1) << 20;
+constexpr size_t kMaxTileCallsPerQuery = 128;
 
 uint64_t brickKey(const v1::BrickData& b) {
   return (uint64_t(uint32_t(b.x())) << 42) | (uint64_t(uint32_t(b.y())) << 21) | uint64_t(uint32_t(b.z()));
@@ -598,7 +599,10 @@ void TiledQuery::run() {
     std::lock_guard lock(mu_);
     fail(status);
   } else {
-    const size_t workers = std::min(tiles_.size(), replicas_ * size_t(config_.options.tiles_in_flight_per_replica));
+    // One thread per tile call in flight (the synchronous client API), capped: a headless Service listing hundreds
+    // of pods must not turn one query into hundreds of threads.
+    const size_t workers = std::min({tiles_.size(), replicas_ * size_t(config_.options.tiles_in_flight_per_replica),
+                                     kMaxTileCallsPerQuery});
     std::vector<std::thread> threads;
     for (size_t i = 0; i < workers; ++i) threads.emplace_back([this] { worker(); });
     {
