@@ -110,6 +110,20 @@ std::string checkWritable(const std::string& path) {
 
 }  // namespace
 
+std::string checkOutputPath(const std::string& flag, const std::string& path,
+                            std::initializer_list<const char*> extensions) {
+  if (path.empty()) return fmt::format("{}: the path is empty", flag);
+  bool known = false;
+  std::string list;
+  for (const char* e : extensions) {
+    known |= endsWith(path, e);
+    list += (list.empty() ? "" : ", ") + std::string(e);
+  }
+  if (!known) return fmt::format("{} {}: expected a {} file", flag, path, list);
+  if (std::string err = checkWritable(path); !err.empty()) return fmt::format("{} {}", flag, err);
+  return {};
+}
+
 std::string openBrickSink(const std::string& path, const FieldLayout& layout, std::unique_ptr<BrickSink>* out) {
   if (path.empty()) return "no output path given";
   const bool npy = endsWith(path, ".npy"), vdb = endsWith(path, ".vdb");

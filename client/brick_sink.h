@@ -12,6 +12,7 @@
 #pragma once
 
 #include <cstdint>
+#include <initializer_list>
 #include <memory>
 #include <string>
 #include <vector>
@@ -41,5 +42,10 @@ class BrickSink {
 };
 
 std::string openBrickSink(const std::string& path, const FieldLayout& layout, std::unique_ptr<BrickSink>* out);
+
+/// "" when `path` ends with one of `extensions` (e.g. {".png"}) and can be created or overwritten (its directory
+/// exists and is writable), without touching it; otherwise "FLAG PATH: the problem".
+std::string checkOutputPath(const std::string& flag, const std::string& path,
+                            std::initializer_list<const char*> extensions);
 
 }  // namespace distband

@@ -62,8 +62,9 @@ struct SeedInput {
 
 std::string buildMeshInput(const ComputeArgs& a, const Interrupter* interrupter, SeedInput* in) {
   if (!a.dims.empty()) return "--dims does not apply to --mesh (use --resolution or --voxel-size)";
+  if ((a.resolution_given || a.resolution != 0) && a.resolution < 2)
+    return fmt::format("--resolution must be at least 2 voxels (got {})", a.resolution);
   if ((a.resolution > 0) == a.voxel_size_given) return "--mesh needs exactly one of --resolution N or --voxel-size H";
-  if (a.resolution < 0) return fmt::format("--resolution must be > 0 (got {})", a.resolution);
   if (a.padding < 0) return fmt::format("--padding must be >= 0 (got {})", a.padding);
   MeshSeedOptions so;
   if (!parseSignMethod(a.sign, &so.sign))
@@ -331,6 +332,7 @@ CliCommand registerComputeCommand(CLI::App& app, const CliContext& context) {
   cmd->add_option("--meta", args->meta, "Also write a JSON description of the field (grid, units, limit, sign)");
   return {cmd, [args, &context, cmd]() {
             args->voxel_size_given = cmd->count("--voxel-size") > 0;
+            args->resolution_given = cmd->count("--resolution") > 0;
             return runCompute(*args, context);
           }};
 }

@@ -35,6 +35,7 @@ struct ComputeArgs {
   std::string dims;              ///< "X,Y,Z"; required with --points
   double voxel_size = 1.0;       ///< world units (meshes: only when voxel_size_given, else --resolution)
   bool voxel_size_given = false; ///< --voxel-size was on the command line
+  bool resolution_given = false; ///< --resolution was on the command line (so 0 is an error, not "unset")
   std::string mesh;              ///< triangle mesh file, or empty
   int resolution = 0;            ///< mesh: voxels along the longest side of the padded box (the paper's N)
   int padding = 3;               ///< mesh: margin in voxels on every side

@@ -3,6 +3,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <memory>
 #include <thread>
@@ -60,13 +61,21 @@ int exitCodeOf(const grpc::Status& s) {
   }
 }
 
+// A server's answer as a sentence: what kind of problem it is, then the server's own message (which names the field).
 std::string describe(const grpc::Status& s) {
-  static const char* names[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT", "DEADLINE_EXCEEDED", "NOT_FOUND",
-                                "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
-                                "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED", "INTERNAL", "UNAVAILABLE", "DATA_LOSS",
-                                "UNAUTHENTICATED"};
-  const int c = int(s.error_code());
-  return fmt::format("{}: {}", c >= 0 && c <= 16 ? names[c] : "ERROR", s.error_message());
+  const std::string& m = s.error_message();
+  switch (s.error_code()) {
+    case grpc::StatusCode::INVALID_ARGUMENT: return "the server refused the request: " + m;
+    case grpc::StatusCode::NOT_FOUND: return "the server does not have it: " + m;
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "the server is over a limit or busy: " + m;
+    case grpc::StatusCode::UNAVAILABLE: return "the server cannot be reached or is shutting down: " + m;
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return "the deadline passed before the server finished: " + m;
+    case grpc::StatusCode::CANCELLED: return "the call was cancelled: " + m;
+    case grpc::StatusCode::UNAUTHENTICATED:
+      return "the server needs a valid token (--token-file or DISTBAND_TOKEN): " + m;
+    case grpc::StatusCode::PERMISSION_DENIED: return "the server refused the credentials: " + m;
+    default: return fmt::format("the server failed (gRPC status {}): {}", int(s.error_code()), m);
+  }
 }
 
 template <typename Enum>
@@ -176,12 +185,15 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
     ctx.err << "distband query: " << msg << "\n";
     return kExitUsage;
   };
-  // Validate every output request before any network traffic.
+  // Validate every flag and output path before any network traffic, naming the flag.
   if (a.out.empty() && a.npy.empty() && a.slice_png.empty() && a.isosurface.empty())
     return usage("nothing to write: give --out, --npy, --slice-png or --isosurface");
   const bool out_vdb = a.out.size() > 4 && a.out.substr(a.out.size() - 4) == ".vdb";
   const bool out_npy = a.out.size() > 4 && a.out.substr(a.out.size() - 4) == ".npy";
-  if (!a.out.empty() && !out_vdb && !out_npy) return usage(fmt::format("--out '{}': expected a .vdb or .npy path", a.out));
+  if (!a.out.empty())
+    if (std::string e = checkOutputPath("--out", a.out, {".vdb", ".npy"}); !e.empty()) return usage(e);
+  if (!a.npy.empty())
+    if (std::string e = checkOutputPath("--npy", a.npy, {".npy"}); !e.empty()) return usage(e);
   const std::string npy_path = out_npy ? a.out : a.npy;
   const bool need_vdb = out_vdb || !a.slice_png.empty() || !a.isosurface.empty();
   if (need_vdb && !(a.limit > 0 && std::isfinite(a.limit)))
@@ -190,6 +202,7 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
   if (!a.slice_png.empty()) {
     if (a.slice_png.size() != 2) return usage("--slice-png takes AXIS:INDEX and a PNG path");
     if (std::string e = parseSliceSpec(a.slice_png[0], &slice); !e.empty()) return usage("--slice-png: " + e);
+    if (std::string e = checkOutputPath("--slice-png", a.slice_png[1], {".png"}); !e.empty()) return usage(e);
   }
   double iso = 0;
   if (!a.isosurface.empty()) {
@@ -201,6 +214,22 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
     } catch (const std::exception&) {
       return usage(fmt::format("--isosurface: '{}' is not a finite number", a.isosurface[0]));
     }
+    if (!(std::abs(iso) < a.limit))
+      return usage(fmt::format("--isosurface {:g}: the surface must lie inside --limit {:g} (beyond it the field "
+                               "holds only the background)",
+                               iso, a.limit));
+    if (std::string e = checkOutputPath("--isosurface", a.isosurface[1], {".obj"}); !e.empty()) return usage(e);
+  }
+  if (!a.mesh.empty()) {  // the upload reads it only after connecting: check it is there now
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(a.mesh, ec))
+      return usage(fmt::format("--mesh {}: no such file", a.mesh));
+    if (meshFormatFromPath(a.mesh) == v1::MESH_FORMAT_UNSPECIFIED)
+      return usage(fmt::format("--mesh {}: unsupported mesh format (expected .obj, .off, .ply or .stl)", a.mesh));
+  }
+  if (!a.volume.empty()) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(a.volume, ec)) return usage(fmt::format("--volume {}: no such file", a.volume));
   }
   ProgressMode pmode;
   if (!pick(a.progress, {{"auto", ProgressMode::kAuto}, {"plain", ProgressMode::kPlain},

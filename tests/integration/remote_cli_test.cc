@@ -133,11 +133,44 @@ TEST(RemoteCliTest, ServerRejectionIsAUsageErrorAndWritesNothing) {
                    "0.3", "--out", f.path("bad.vdb"), "--progress", "quiet"}),
             2);
   EXPECT_NE(f.err.str().find("grid.resolution"), std::string::npos) << f.err.str();
+  // The server's answer reads as a sentence, then its message.
+  EXPECT_NE(f.err.str().find("the server refused the request: grid.resolution"), std::string::npos) << f.err.str();
   EXPECT_FALSE(fs::exists(f.path("bad.vdb")));
   // A .vdb needs a finite limit: refused before contacting the server.
   EXPECT_EQ(f.run({"query", "--server", f.address, "--points", "1,2,3", "--dims", "8,8,8", "--voxel-size", "1",
                    "--out", f.path("nolimit.vdb")}),
             2);
+}
+
+TEST(RemoteCliTest, EveryOutputProblemIsReportedBeforeAnyUpload) {
+  Fixture f;
+  const std::vector<std::string> base = {"query", "--server", f.address, "--mesh", f.path("cube.obj"),
+                                         "--resolution", "32", "--limit", "0.3", "--progress", "quiet"};
+  auto run = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args = base;
+    args.insert(args.end(), extra.begin(), extra.end());
+    return f.run(args);
+  };
+  const std::string missing_dir = f.path("no-such-dir") + "/field.vdb";
+  const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
+      {{"--out", missing_dir}, "--out " + missing_dir + ": directory"},
+      {{"--out", f.path("field.txt")}, "--out " + f.path("field.txt") + ": expected a .vdb, .npy file"},
+      {{"--npy", f.path("field.vdb")}, "--npy"},
+      {{"--slice-png", "z:4", f.path("slice.jpg")}, "--slice-png " + f.path("slice.jpg") + ": expected a .png file"},
+      {{"--isosurface", "0.1", f.path("iso.stl")}, "--isosurface " + f.path("iso.stl") + ": expected a .obj file"},
+      {{"--isosurface", "0.5", f.path("iso.obj")}, "--isosurface 0.5: the surface must lie inside --limit 0.3"},
+  };
+  for (const auto& [extra, words] : cases) {
+    EXPECT_EQ(run(extra), 2) << words;
+    EXPECT_NE(f.err.str().find(words), std::string::npos) << f.err.str();
+    EXPECT_EQ(f.out.str().find("uploaded"), std::string::npos) << "nothing may be uploaded first: " << f.out.str();
+  }
+  EXPECT_EQ(f.run({"query", "--server", f.address, "--mesh", f.path("nope.obj"), "--resolution", "32", "--limit",
+                   "0.3", "--out", f.path("x.vdb")}),
+            2);
+  EXPECT_NE(f.err.str().find("--mesh " + f.path("nope.obj") + ": no such file"), std::string::npos) << f.err.str();
+  EXPECT_EQ(f.server->service().cache().size(), 0u) << "nothing was uploaded";
+  EXPECT_EQ(std::distance(fs::directory_iterator(f.dir), fs::directory_iterator()), 1) << "only cube.obj";
 }
 
 TEST(RemoteCliTest, InterruptCancelsTheQueryAndWritesNothing) {
