@@ -80,7 +80,7 @@ std::string buildMeshInput(const ComputeArgs& a, const Interrupter* interrupter,
   go.voxel_size = a.voxel_size_given ? a.voxel_size : 0;
   go.padding_voxels = a.padding;
   if (std::string e = gridForMesh(mesh, go, &in->grid); !e.empty()) return e;
-  so.limit_voxels = a.limit / in->grid.voxelSize();
+  so.limit_voxels = a.limit_voxels > 0 ? a.limit_voxels : a.limit / in->grid.voxelSize();
   so.interrupter = interrupter;
   if (std::string e = makeMeshSeeds(in->grid, mesh, so, &in->seeds); !e.empty()) return fmt::format("{}: {}", a.mesh, e);
   in->signed_distance = so.sign != SignMethod::kUnsigned;
@@ -207,9 +207,10 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
     if (a.second_ring) options.second_ring = true;  // otherwise the engine's default for triangle sites: off
   }
   options.segment_length_world = a.segment;
-  options.limit_world = a.limit;
   options.threads = a.threads;
   if (std::isnan(a.limit) || a.limit <= 0) return usage(fmt::format("--limit must be > 0 (got {})", a.limit));
+  if (a.limit_voxels != 0 && !(a.limit_voxels > 0 && std::isfinite(a.limit_voxels)))
+    return usage(fmt::format("--limit-voxels must be finite and > 0 (got {})", a.limit_voxels));
   if (!(a.segment >= 0) || std::isinf(a.segment))
     return usage(fmt::format("--segment must be finite and >= 0 (got {})", a.segment));
   if (a.threads < 0) return usage(fmt::format("--threads must be >= 0 (got {})", a.threads));
@@ -223,11 +224,14 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
     }
     return usage(e);
   }
+  // The limit in force, in world units (--limit-voxels needs the grid's voxel size).
+  const double limit = a.limit_voxels > 0 ? a.limit_voxels * in.grid.voxelSize() : a.limit;
+  options.limit_world = limit;
   if (std::string e = validateOptions(in.grid, options); !e.empty()) return usage(e);
 
   FieldLayout layout;
   layout.grid = in.grid;
-  layout.background = std::isfinite(a.limit) ? float(a.limit) : std::numeric_limits<float>::infinity();
+  layout.background = std::isfinite(limit) ? float(limit) : std::numeric_limits<float>::infinity();
   layout.signed_distance = in.signed_distance;
   layout.inside = in.mask;
   layout.sign_from_band = in.mesh && in.signed_distance;
@@ -239,7 +243,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   ctx.out << fmt::format("distband compute: {}, voxel size {:g}, stencil {}, mode {}, segment {}, limit {}, threads {}\n",
                          in.description, in.grid.voxelSize(), stencilName(stencil), modeName(options.mode),
                          a.segment > 0 ? fmt::format("{:g}", a.segment) : std::string("none"),
-                         std::isfinite(a.limit) ? fmt::format("{:g}", a.limit) : std::string("none"),
+                         std::isfinite(limit) ? fmt::format("{:g}", limit) : std::string("none"),
                          a.threads > 0 ? std::to_string(a.threads) : std::string("all"));
   ctx.out.flush();
 
@@ -278,7 +282,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
     meta.grid = in.grid;
     meta.data_file = std::filesystem::path(a.out).filename().string();
     meta.signed_distance = in.signed_distance;
-    meta.limit_world = a.limit;
+    meta.limit_world = limit;
     meta.background_world = layout.background;
     meta.stencil = std::string(stencilName(stencil));
     meta.mode = std::string(modeName(options.mode));
@@ -325,7 +329,9 @@ CliCommand registerComputeCommand(CLI::App& app, const CliContext& context) {
                   "exact (default) | paper (the SMI 2009 lifespan method); meshes: exact-feature | paper")
       ->default_val("exact");
   cmd->add_option("--segment", args->segment, "Segment length in world units (0: one segment)")->default_val(0);
-  cmd->add_option("--limit", args->limit, "Distance limit in world units (default: none)");
+  CLI::Option* limit = cmd->add_option("--limit", args->limit, "Distance limit in world units (default: none)");
+  cmd->add_option("--limit-voxels", args->limit_voxels, "Distance limit in voxels of the grid (instead of --limit)")
+      ->excludes(limit);
   cmd->add_option("--threads", args->threads, "Worker threads (0: all cores)")->default_val(0);
   cmd->add_option("--out", args->out, "Output file: .npy (dense float32, shape (Z, Y, X)) or .vdb (OpenVDB level set)")
       ->required();

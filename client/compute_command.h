@@ -46,6 +46,7 @@ struct ComputeArgs {
   std::string mode = "exact";
   double segment = 0;                                         ///< world units; 0: one segment
   double limit = std::numeric_limits<double>::infinity();     ///< world units
+  double limit_voxels = 0;  ///< > 0: the limit in voxels of the grid instead (exclusive with --limit)
   int threads = 0;                                            ///< 0: all cores
   std::string out;
   std::string meta;  ///< optional JSON sidecar describing the field

@@ -34,6 +34,7 @@ struct QueryArgs {
   std::string stencil = "auto", mode = "exact", sign, encoding = "float32", progress = "auto";
   double segment = 0;
   double limit = 0;
+  double limit_voxels = 0;
   double deadline_s = 0;
   std::string out, npy;
   std::vector<std::string> slice_png;   ///< AXIS:INDEX PNG
@@ -177,6 +178,7 @@ std::string buildRequest(const QueryArgs& a, RemoteClient& client, const CliCont
   r->set_encoding(enc);
   r->set_segment_length(a.segment);
   r->set_limit(a.limit);
+  r->set_limit_voxels(a.limit_voxels);
   return {};
 }
 
@@ -196,8 +198,12 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
     if (std::string e = checkOutputPath("--npy", a.npy, {".npy"}); !e.empty()) return usage(e);
   const std::string npy_path = out_npy ? a.out : a.npy;
   const bool need_vdb = out_vdb || !a.slice_png.empty() || !a.isosurface.empty();
-  if (need_vdb && !(a.limit > 0 && std::isfinite(a.limit)))
-    return usage("a .vdb, --slice-png or --isosurface needs a finite --limit (the level set's background)");
+  if (a.limit_voxels != 0 && !(a.limit_voxels > 0 && std::isfinite(a.limit_voxels)))
+    return usage(fmt::format("--limit-voxels must be finite and > 0 (got {})", a.limit_voxels));
+  const bool finite_limit = (a.limit > 0 && std::isfinite(a.limit)) || a.limit_voxels > 0;
+  if (need_vdb && !finite_limit)
+    return usage("a .vdb, --slice-png or --isosurface needs a finite --limit or --limit-voxels (the level set's "
+                 "background)");
   SliceSpec slice;
   if (!a.slice_png.empty()) {
     if (a.slice_png.size() != 2) return usage("--slice-png takes AXIS:INDEX and a PNG path");
@@ -214,7 +220,7 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
     } catch (const std::exception&) {
       return usage(fmt::format("--isosurface: '{}' is not a finite number", a.isosurface[0]));
     }
-    if (!(std::abs(iso) < a.limit))
+    if (a.limit_voxels == 0 && !(std::abs(iso) < a.limit))  // in voxels: checked once the header gives the size
       return usage(fmt::format("--isosurface {:g}: the surface must lie inside --limit {:g} (beyond it the field "
                                "holds only the background)",
                                iso, a.limit));
@@ -257,6 +263,11 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
                            h.query_id(), grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
                            grid.origin().x, grid.origin().y, grid.origin().z, h.limit(),
                            h.signed_() ? "signed" : "unsigned");
+    if (!a.isosurface.empty() && !(std::abs(iso) < h.limit())) {
+      setup_error = fmt::format("--isosurface {:g}: the surface must lie inside the limit {:g} (--limit-voxels {:g})",
+                                iso, h.limit(), a.limit_voxels);
+      return false;
+    }
     if (need_vdb) vdb = std::make_unique<VdbFieldBuilder>(grid, float(h.limit()));
     if (!npy_path.empty()) {
       FieldLayout layout;
@@ -368,7 +379,7 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
       auto acc = grid->getConstAccessor();
       const VoxelSampler sample = [&](const Coord& c) { return acc.getValue(openvdb::Coord(c.x, c.y, c.z)); };
       SlicePngOptions so;
-      so.limit_world = a.limit;
+      so.limit_world = result.header.limit();
       if (std::string e = writeSlicePng(a.slice_png[1], result.grid, sample, slice, so); !e.empty()) fail(e);
       else ctx.out << "wrote " << a.slice_png[1] << " (slice " << a.slice_png[0] << ")\n";
     }
@@ -407,7 +418,9 @@ CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
   cmd->add_option("--sign", args->sign,
                   "pseudonormal | winding | parity | unsigned (meshes), mask-inside | unsigned (volumes)");
   cmd->add_option("--segment", args->segment, "Segment length in world units (0: one segment)");
-  cmd->add_option("--limit", args->limit, "Distance limit in world units (0: none)");
+  CLI::Option* limit = cmd->add_option("--limit", args->limit, "Distance limit in world units (0: none)");
+  cmd->add_option("--limit-voxels", args->limit_voxels, "Distance limit in voxels of the grid (instead of --limit)")
+      ->excludes(limit);
   cmd->add_option("--encoding", args->encoding, "float32 | float16")->capture_default_str();
   cmd->add_option("--deadline", args->deadline_s, "Give up after this many seconds (0: never)");
   cmd->add_option("--progress", args->progress, "auto | plain | terminal | quiet")->capture_default_str();

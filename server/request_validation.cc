@@ -322,6 +322,10 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
     return invalid(fmt::format("segment_length must be finite and >= 0 (got {})", r.segment_length()));
   if (std::isnan(r.limit()) || r.limit() < 0)
     return invalid(fmt::format("limit must be > 0, +infinity, or 0 for no limit (got {})", r.limit()));
+  if (r.limit_voxels() != 0 && !(std::isfinite(r.limit_voxels()) && r.limit_voxels() > 0))
+    return invalid(fmt::format("limit_voxels must be finite and > 0 when set (got {})", r.limit_voxels()));
+  if (r.limit_voxels() != 0 && r.limit() != 0)
+    return invalid("limit and limit_voxels are mutually exclusive: give the limit in world units or in voxels");
   q.engine.segment_length_world = r.segment_length();
   q.engine.limit_world = r.limit() == 0 ? std::numeric_limits<double>::infinity() : r.limit();
 
@@ -331,6 +335,7 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
 
   if (!r.has_grid()) return invalid("grid must be set (voxel_size or resolution, or dims)");
   if (Status s = resolveGrid(r.grid(), q, r.has_tile(), &q.grid); !s.ok()) return s;
+  if (r.limit_voxels() != 0) q.engine.limit_world = r.limit_voxels() * q.grid.voxelSize();
   if (r.has_tile())
     if (Status s = resolveTile(r.tile(), q.grid, &q); !s.ok()) return s;
   // The budget bounds the work: the voxels computed (a tile's window, not the whole grid it belongs to).

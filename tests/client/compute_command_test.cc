@@ -92,6 +92,30 @@ TEST(ComputeCommandTest, LimitBackgroundAndSignedVolume) {
   std::remove(meta.c_str());
 }
 
+TEST(ComputeCommandTest, LimitInVoxelsIsTheLimitTimesTheVoxelSize) {
+  const std::string a = tmp("limit_world.npy"), b = tmp("limit_voxels.npy");
+  const std::vector<std::string> base = {"compute", "--points", "2.5,3,4", "--dims", "16,14,12", "--voxel-size", "0.5"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args = base;
+    args.insert(args.end(), extra.begin(), extra.end());
+    return run(args);
+  };
+  ASSERT_EQ(with({"--limit", "2", "--out", a}).code, 0);
+  const CliResult r = with({"--limit-voxels", "4", "--out", b});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("limit 2,"), std::string::npos) << r.out;  // reported in world units
+  std::vector<float> va, vb;
+  Coord d;
+  ASSERT_EQ(readNpyFloat32(a, &va, &d), "");
+  ASSERT_EQ(readNpyFloat32(b, &vb, &d), "");
+  EXPECT_EQ(va, vb);
+  EXPECT_EQ(with({"--limit", "2", "--limit-voxels", "4", "--out", b}).code, 2);
+  EXPECT_NE(with({"--limit-voxels", "-1", "--out", b}).err.find("--limit-voxels must be finite and > 0"),
+            std::string::npos);
+  std::remove(a.c_str());
+  std::remove(b.c_str());
+}
+
 TEST(ComputeCommandTest, HelpExitsZero) {
   const CliResult r = run({"compute", "--help"});
   EXPECT_EQ(r.code, 0);

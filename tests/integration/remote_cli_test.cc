@@ -173,6 +173,31 @@ TEST(RemoteCliTest, EveryOutputProblemIsReportedBeforeAnyUpload) {
   EXPECT_EQ(std::distance(fs::directory_iterator(f.dir), fs::directory_iterator()), 1) << "only cube.obj";
 }
 
+TEST(RemoteCliTest, LimitInVoxelsGivesTheSameFieldAsTheWorldLimit) {
+  Fixture f;
+  const std::vector<std::string> base = {"query", "--server", f.address, "--points", "1,2,3;6,5,4", "--dims",
+                                         "24,20,16", "--voxel-size", "0.5", "--progress", "quiet"};
+  auto run = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args = base;
+    args.insert(args.end(), extra.begin(), extra.end());
+    return f.run(args);
+  };
+  ASSERT_EQ(run({"--limit", "1.5", "--out", f.path("world.npy")}), 0) << f.err.str();
+  ASSERT_EQ(run({"--limit-voxels", "3", "--out", f.path("voxels.npy"), "--isosurface", "0.5", f.path("iso.obj")}), 0)
+      << f.err.str();
+  EXPECT_NE(f.out.str().find("limit 1.5,"), std::string::npos) << f.out.str();
+  std::vector<float> a, b;
+  Coord d;
+  ASSERT_EQ(readNpyFloat32(f.path("world.npy"), &a, &d), "");
+  ASSERT_EQ(readNpyFloat32(f.path("voxels.npy"), &b, &d), "");
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(run({"--limit", "1.5", "--limit-voxels", "3", "--out", f.path("both.npy")}), 2);
+  // In voxels the isosurface is checked against the limit once the header gives the voxel size.
+  EXPECT_EQ(run({"--limit-voxels", "3", "--out", f.path("v.vdb"), "--isosurface", "2", f.path("far.obj")}), 2);
+  EXPECT_NE(f.err.str().find("--isosurface 2: the surface must lie inside the limit 1.5"), std::string::npos)
+      << f.err.str();
+}
+
 TEST(RemoteCliTest, InterruptCancelsTheQueryAndWritesNothing) {
   Fixture f;
   const int code = f.run({"query", "--server", f.address, "--points", "1,2,3", "--dims", "256,256,256",
