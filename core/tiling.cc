@@ -54,8 +54,7 @@ std::vector<TilePlan> planTiles(const Coord& dims, uint64_t max_tile_voxels, int
           const int lo[3] = {x, y, z}, hi[3] = {x + t.deliver.dims.x, y + t.deliver.dims.y, z + t.deliver.dims.z};
           int wlo[3], whi[3];
           for (int a = 0; a < 3; ++a) {
-            wlo[a] = std::max(0, (lo[a] - halo_voxels) / kBrickSize * kBrickSize);
-            if (lo[a] - halo_voxels < 0) wlo[a] = 0;
+            wlo[a] = std::max(0, (lo[a] - halo_voxels) / kBrickSize * kBrickSize);  // negative: 0
             whi[a] = std::min(grid_dims[a], bricksOf(hi[a] + halo_voxels) * kBrickSize);
           }
           t.window.min = {wlo[0], wlo[1], wlo[2]};

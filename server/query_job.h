@@ -51,16 +51,7 @@ class QueryJob final : public QueryStream {
   void summarize(v1::QuerySummary* summary) const override;
   std::string logStats() const override;
   const EngineResult& result() const { return result_; }
-  double seedSeconds() const { return seed_seconds_; }
-  Clock::time_point engineStopped() const { return engine_stopped_; }
   Clock::time_point started() const { return started_; }
-  uint64_t bricksSent() const { return bricks_sent_; }
-  /// Voxels streamed (for a tile: those of its `deliver` box; the engine's count includes the halo).
-  uint64_t voxelsSent() const { return voxels_sent_; }
-  const std::vector<uint64_t>& segmentVoxels() const { return segment_voxels_sent_; }
-  uint64_t valueBytes() const { return value_bytes_; }
-  const std::vector<double>& segmentSentSeconds() const { return segment_sent_seconds_; }
-  const std::vector<uint64_t>& segmentBricks() const { return segment_bricks_; }
 
  private:
   void run();
@@ -78,6 +69,7 @@ class QueryJob final : public QueryStream {
   Clock::time_point started_{}, engine_stopped_{}, segment_started_{};
   double segment_compute_seconds_ = 0;
   uint64_t segment_voxels_ = 0, segment_bricks_so_far_ = 0;  ///< of the segment being emitted
+  /// Streamed (for a tile: the voxels of its `deliver` box; the engine's counts include the halo).
   uint64_t bricks_sent_ = 0, voxels_sent_ = 0, value_bytes_ = 0;
   std::vector<uint64_t> segment_voxels_sent_;
   std::vector<double> segment_sent_seconds_;
