@@ -109,8 +109,23 @@ void TiledQuery::stop() {
   stop_.store(true);
   queue_.abort();
   std::lock_guard lock(mu_);
+  cancelCalls();
+}
+
+void TiledQuery::cancelCalls() {
   for (grpc::ClientContext* c : calls_) c->TryCancel();
   cv_.notify_all();
+}
+
+TiledQuery::RegisteredCall::RegisteredCall(TiledQuery& query, grpc::ClientContext* context)
+    : query_(query), context_(context) {
+  std::lock_guard lock(query_.mu_);
+  query_.calls_.insert(context_);
+}
+
+TiledQuery::RegisteredCall::~RegisteredCall() {
+  std::lock_guard lock(query_.mu_);
+  query_.calls_.erase(context_);
 }
 
 void TiledQuery::join() {
@@ -143,13 +158,12 @@ Status TiledQuery::uploadToReplicas(
     auto stub = v1::DistanceField::NewStub(r.channel);
     grpc::ClientContext context;
     config_.pool.prepare(&context, tileDeadline());
+    Status s;
     {
-      std::lock_guard lock(mu_);
-      calls_.insert(&context);
+      RegisteredCall registered(*this, &context);
+      s = upload(*stub, &context);
     }
-    const Status s = upload(*stub, &context);
     std::lock_guard lock(mu_);
-    calls_.erase(&context);
     if (s.ok()) {
       uploaded_.insert({r.address, id});
       ++present;
@@ -167,8 +181,8 @@ Status TiledQuery::uploadToReplicas(
 namespace {
 
 template <typename Chunk>
-Status streamUpload(grpc::ClientContext* context, std::unique_ptr<grpc::ClientWriter<Chunk>> writer,
-                    const std::string& bytes, Chunk first, const v1::UploadReply& reply, const std::string& id) {
+Status streamUpload(std::unique_ptr<grpc::ClientWriter<Chunk>> writer, const std::string& bytes, Chunk first,
+                    const v1::UploadReply& reply, const std::string& id) {
   for (size_t off = 0; off == 0 || off < bytes.size(); off += kUploadChunkBytes) {
     Chunk chunk = off == 0 ? first : Chunk();
     chunk.set_data(bytes.substr(off, kUploadChunkBytes));
@@ -179,7 +193,6 @@ Status streamUpload(grpc::ClientContext* context, std::unique_ptr<grpc::ClientWr
   if (!s.ok()) return fromGrpcStatus(s);
   if (reply.asset_id() != id)
     return Status::Internal(fmt::format("the replica named the upload {} instead of {}", reply.asset_id(), id));
-  (void)context;
   return Status::Ok();
 }
 
@@ -197,32 +210,29 @@ Status TiledQuery::prepareSeeds() {
       first.mutable_header()->set_format(v1::MESH_FORMAT_PLY);
       first.mutable_header()->set_total_bytes(mesh_bytes_.size());
       first.mutable_header()->set_name(query_.asset->name.substr(0, 200));
-      return streamUpload(context, stub.UploadMesh(context, &reply), mesh_bytes_, first, reply, mesh_id_);
+      return streamUpload(stub.UploadMesh(context, &reply), mesh_bytes_, first, reply, mesh_id_);
     });
   }
   if (query_.seed_kind == ResolvedQuery::SeedKind::kVolume) {
     // Crops too large to travel inside a tile's request are uploaded to every replica (without a limit every window
     // is the whole grid: one upload). The ids are settled on the first call, before any worker reads them.
     const uint64_t inline_limit = config_.options.max_message_bytes / 2;
-    if (!volumes_planned_) {
+    const bool planning = !volumes_planned_;
+    if (planning) {
       for (const Tile& t : tiles_)
-        if (uint64_t(t.plan.window.voxelCount()) > inline_limit && !volume_ids_.count(boxKey(t.plan.window)))
-          volume_ids_[boxKey(t.plan.window)] = {t.plan.window, ""};
-      for (auto& [key, entry] : volume_ids_) {
-        const std::string bytes = cropMask(*query_.asset->mask, query_.asset->dims, entry.first);
-        entry.second = volumeAssetId(dimsOf(entry.first.dims), bytes);
-      }
+        if (uint64_t(t.plan.window.voxelCount()) > inline_limit) volume_ids_[boxKey(t.plan.window)] = {t.plan.window, ""};
       volumes_planned_ = true;
     }
-    for (const auto& [key, entry] : volume_ids_) {
+    for (auto& [key, entry] : volume_ids_) {
       const std::string bytes = cropMask(*query_.asset->mask, query_.asset->dims, entry.first);
       const v1::Dims dims = dimsOf(entry.first.dims);
+      if (planning) entry.second = volumeAssetId(dims, bytes);
       const std::string& id = entry.second;
       Status s = uploadToReplicas(id, [&](v1::DistanceField::Stub& stub, grpc::ClientContext* context) {
         v1::UploadReply reply;
         v1::UploadVolumeChunk first;
         *first.mutable_header()->mutable_dims() = dims;
-        return streamUpload(context, stub.UploadVolume(context, &reply), bytes, first, reply, id);
+        return streamUpload(stub.UploadVolume(context, &reply), bytes, first, reply, id);
       });
       if (!s.ok()) return s;
     }
@@ -332,16 +342,6 @@ TiledQuery::Attempt TiledQuery::runTile(size_t index) {
   if (!mesh_reach_[index]) return attempt;  // no triangle within the limit: nothing to deliver
   v1::QueryRequest request = tileRequest(tiles_[index]);
   if (!hasWork(request, query_.sign == v1::SIGN_MODE_MASK_INSIDE)) return attempt;  // nothing within the limit
-  grpc::ClientContext context;
-  config_.pool.prepare(&context, tileDeadline());
-  {
-    std::lock_guard lock(mu_);
-    if (stop_.load()) {
-      attempt.status = Status::Cancelled("stopped");
-      return attempt;
-    }
-    calls_.insert(&context);
-  }
   // First attempts go where round_robin sends them; a retry goes to a replica this tile has not failed on.
   std::shared_ptr<v1::DistanceField::Stub> stub;
   std::set<std::string> avoid;
@@ -359,9 +359,14 @@ TiledQuery::Attempt TiledQuery::runTile(size_t index) {
   }
   if (!stub) stub = config_.pool.balanced();
   if (!stub) {
-    std::lock_guard lock(mu_);
-    calls_.erase(&context);
     attempt.status = Status::Unavailable(fmt::format("--peers {} resolves to no replica", config_.pool.target()));
+    return attempt;
+  }
+  grpc::ClientContext context;
+  config_.pool.prepare(&context, tileDeadline());
+  RegisteredCall registered(*this, &context);
+  if (stop_.load()) {  // stop() may have cancelled every call just before this one was registered
+    attempt.status = Status::Cancelled("stopped");
     return attempt;
   }
   auto reader = stub->Query(&context, request);
@@ -378,7 +383,6 @@ TiledQuery::Attempt TiledQuery::runTile(size_t index) {
   const grpc::Status s = reader->Finish();
   attempt.peer = context.peer();
   std::lock_guard lock(mu_);
-  calls_.erase(&context);
   attempt.status = fromGrpcStatus(s);
   attempt.asset_missing = s.error_code() == grpc::StatusCode::NOT_FOUND;
   if (attempt.status.ok() && !tiles_[index].finished)
@@ -521,8 +525,7 @@ void TiledQuery::advance() {
 
 void TiledQuery::fail(Status status) {
   if (status_.ok()) status_ = std::move(status);
-  for (grpc::ClientContext* c : calls_) c->TryCancel();
-  cv_.notify_all();
+  cancelCalls();
 }
 
 void TiledQuery::worker() {
@@ -541,7 +544,9 @@ void TiledQuery::worker() {
     // Back-off before a retry: gRPC's round_robin needs a moment to see that a replica is gone.
     for (int waited = 0; attempts > 0 && waited < 100 * attempts && !stopping(); waited += 5)
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    Attempt a = stopping() ? Attempt{Status::Cancelled("stopped"), false} : runTile(index);
+    Attempt a;
+    if (stopping()) a.status = Status::Cancelled("stopped");
+    else a = runTile(index);
     if (a.asset_missing && !stopping()) {
       {
         std::lock_guard lock(mu_);
@@ -588,7 +593,7 @@ void TiledQuery::run() {
   replicas_ = config_.pool.replicas().size();
   {
     std::lock_guard lock(mu_);
-    for (const TilePlan& p : plan(query_, config_.options.tile_voxels)) tiles_.push_back(Tile{p});
+    for (const TilePlan& p : plan(query_, config_.options.tile_voxels)) tiles_.emplace_back().plan = p;
     for (size_t i = 0; i < tiles_.size(); ++i) pending_.push_back(i);
   }
   mesh_reach_ = meshReach();
@@ -611,17 +616,13 @@ void TiledQuery::run() {
         cv_.wait_for(lock, std::chrono::milliseconds(5));
         if (config_.interrupter.interrupted()) {
           stop_.store(true);
-          for (grpc::ClientContext* c : calls_) c->TryCancel();
-          cv_.notify_all();
+          cancelCalls();
         }
         if (running_ == 0 && pending_.empty() && !all_sent_ && status_.ok() && !stop_.load())
           fail(Status::Internal("every tile ended but the merged stream has not (a replica's stream was incomplete)"));
       }
-      if (!all_sent_ || !status_.ok()) {
-        stop_.store(true);
-        for (grpc::ClientContext* c : calls_) c->TryCancel();
-      }
-      cv_.notify_all();
+      if (!all_sent_ || !status_.ok()) stop_.store(true);
+      cancelCalls();  // none is left after a complete stream
     }
     for (std::thread& t : threads) t.join();
   }

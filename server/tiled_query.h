@@ -94,8 +94,23 @@ class TiledQuery final : public QueryStream {
     std::string peer;  ///< the replica it ran on (as gRPC names it, e.g. "ipv4:10.0.0.1:50051")
   };
 
+  /// Keeps a call in calls_ (so stop() and fail() cancel it) for its scope.
+  class RegisteredCall {
+   public:
+    RegisteredCall(TiledQuery& query, grpc::ClientContext* context);
+    ~RegisteredCall();
+    RegisteredCall(const RegisteredCall&) = delete;
+    RegisteredCall& operator=(const RegisteredCall&) = delete;
+
+   private:
+    TiledQuery& query_;
+    grpc::ClientContext* context_;
+  };
+
   void run();
   void worker();
+  /// Under mu_: cancels every registered call and wakes the waiters.
+  void cancelCalls();
   Attempt runTile(size_t index);
   /// Under mu_: one message of tile `index`'s stream.
   void onMessage(size_t index, v1::QueryReply& message);
