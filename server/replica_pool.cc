@@ -5,10 +5,11 @@
 #include <arpa/inet.h>
 
 #include <algorithm>
-#include <fstream>
 #include <sstream>
 
 #include <fmt/format.h>
+
+#include "server/token_auth.h"
 
 namespace distband {
 namespace {
@@ -37,45 +38,8 @@ bool splitHostPort(const std::string& s, std::string* host, std::string* port) {
   return !host->empty() && !port->empty() && std::all_of(port->begin(), port->end(), ::isdigit);
 }
 
-// One round_robin target for single-address targets: gRPC's ipv4:/ipv6: schemes take one family each (IPv4 wins).
-std::string combinedTarget(const std::vector<std::string>& addresses) {
-  std::string v4, v6;
-  for (const std::string& a : addresses) {
-    std::string& list = a.rfind("ipv4:", 0) == 0 ? v4 : v6;
-    list += (list.empty() ? "" : ",") + a.substr(5);
-  }
-  return !v4.empty() ? "ipv4:" + v4 : (!v6.empty() ? "ipv6:" + v6 : "");
-}
-
-}  // namespace
-
-static std::vector<std::string> resolveName(const std::string& name, const std::string& target, std::string* error);
-
-std::vector<std::string> resolveReplicaAddresses(const std::string& target, std::string* error) {
-  std::vector<std::string> out;
-  if (target.rfind("ipv4:", 0) == 0 || target.rfind("ipv6:", 0) == 0) {
-    const std::string scheme = target.substr(0, 5);
-    for (const std::string& a : split(target.substr(5), ',')) out.push_back(scheme + a);
-    if (out.empty()) *error = fmt::format("--peers {}: no address after '{}'", target, scheme);
-    return out;
-  }
-  std::vector<std::string> names;
-  if (target.rfind("dns:///", 0) == 0) names = {target.substr(7)};
-  else if (target.rfind("dns:", 0) == 0) names = {target.substr(4)};
-  else names = split(target, ',');
-  if (names.empty()) *error = fmt::format("--peers {}: no replica named", target);
-  for (const std::string& name : names) {
-    std::string one_error;
-    for (std::string& a : resolveName(name, target, &one_error)) out.push_back(std::move(a));
-    if (!one_error.empty()) *error = one_error;  // reported only when nothing resolves
-  }
-  std::sort(out.begin(), out.end());
-  out.erase(std::unique(out.begin(), out.end()), out.end());
-  if (!out.empty()) error->clear();
-  return out;
-}
-
-static std::vector<std::string> resolveName(const std::string& name, const std::string& target, std::string* error) {
+// The addresses one HOST:PORT resolves to (getaddrinfo), as single-address gRPC targets.
+std::vector<std::string> resolveName(const std::string& name, const std::string& target, std::string* error) {
   std::vector<std::string> out;
   std::string host, port;
   if (!splitHostPort(name, &host, &port)) {
@@ -105,6 +69,43 @@ static std::vector<std::string> resolveName(const std::string& name, const std::
   return out;
 }
 
+// One round_robin target for single-address targets: gRPC's ipv4:/ipv6: schemes take one family each (IPv4 wins).
+std::string combinedTarget(const std::vector<std::string>& addresses) {
+  std::string v4, v6;
+  for (const std::string& a : addresses) {
+    std::string& list = a.rfind("ipv4:", 0) == 0 ? v4 : v6;
+    list += (list.empty() ? "" : ",") + a.substr(5);
+  }
+  return !v4.empty() ? "ipv4:" + v4 : (!v6.empty() ? "ipv6:" + v6 : "");
+}
+
+}  // namespace
+
+std::vector<std::string> resolveReplicaAddresses(const std::string& target, std::string* error) {
+  std::vector<std::string> out;
+  if (target.rfind("ipv4:", 0) == 0 || target.rfind("ipv6:", 0) == 0) {
+    const std::string scheme = target.substr(0, 5);
+    for (const std::string& a : split(target.substr(5), ',')) out.push_back(scheme + a);
+    if (out.empty()) *error = fmt::format("--peers {}: no address after '{}'", target, scheme);
+    return out;
+  }
+  std::vector<std::string> names;
+  if (target.rfind("dns:///", 0) == 0) names = {target.substr(7)};
+  else if (target.rfind("dns:", 0) == 0) names = {target.substr(4)};
+  else names = split(target, ',');
+  if (names.empty()) *error = fmt::format("--peers {}: no replica named", target);
+  for (const std::string& name : names) {
+    std::string one_error;
+    for (std::string& a : resolveName(name, target, &one_error)) out.push_back(std::move(a));
+    if (!one_error.empty()) *error = one_error;  // reported only when nothing resolves
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  if (!out.empty()) error->clear();
+  return out;
+}
+
+
 Status ReplicaPool::create(const ServerOptions& o, std::unique_ptr<ReplicaPool>* out) {
   std::unique_ptr<ReplicaPool> pool(new ReplicaPool());
   pool->target_ = o.peers;
@@ -117,17 +118,10 @@ Status ReplicaPool::create(const ServerOptions& o, std::unique_ptr<ReplicaPool>*
     pool->credentials_ = grpc::SslCredentials(ssl);
     pool->tls_name_ = o.peer_tls_name;
   }
-  if (!o.peer_token_file.empty()) {
-    std::ifstream in(o.peer_token_file);
-    if (!in) return Status::InvalidArgument(fmt::format("--peer-token-file {}: cannot read the file", o.peer_token_file));
-    for (std::string line; std::getline(in, line);) {
-      const size_t b = line.find_first_not_of(" \t\r"), e = line.find_last_not_of(" \t\r");
-      if (b == std::string::npos || line[b] == '#') continue;
-      pool->token_ = line.substr(b, e - b + 1);
-      break;
-    }
-    if (pool->token_.empty())
-      return Status::InvalidArgument(fmt::format("--peer-token-file {}: the file holds no token", o.peer_token_file));
+  if (!o.peer_token_file.empty()) {  // the first token (the replicas check it)
+    std::vector<TokenLine> tokens;
+    if (Status s = readTokenLines(o.peer_token_file, "--peer-token-file", &tokens); !s.ok()) return s;
+    pool->token_ = tokens.front().token;
   }
   std::string error;
   if (resolveReplicaAddresses(o.peers, &error).empty() && error.find("expected") != std::string::npos)

@@ -40,19 +40,29 @@ Status TokenAuth::fromTokens(const std::vector<std::string>& tokens, std::unique
   return Status::Ok();
 }
 
-Status TokenAuth::load(const std::string& path, std::unique_ptr<TokenAuth>* out) {
+Status readTokenLines(const std::string& path, const char* flag, std::vector<TokenLine>* out) {
   std::ifstream in(path);
-  if (!in) return Status::InvalidArgument(fmt::format("--auth-token-file {}: cannot read the file", path));
-  std::vector<std::string> tokens;
+  if (!in) return Status::InvalidArgument(fmt::format("{} {}: cannot read the file", flag, path));
+  out->clear();
   std::string line;
   for (int n = 1; std::getline(in, line); ++n) {
     const std::string_view t = trim(line);
     if (t.empty() || t.front() == '#') continue;
-    if (std::string e = tokenProblem(t); !e.empty())
-      return Status::InvalidArgument(fmt::format("--auth-token-file {} line {}: {}", path, n, e));
-    tokens.emplace_back(t);
+    out->push_back({n, std::string(t)});
   }
-  if (tokens.empty()) return Status::InvalidArgument(fmt::format("--auth-token-file {}: the file holds no token", path));
+  if (out->empty()) return Status::InvalidArgument(fmt::format("{} {}: the file holds no token", flag, path));
+  return Status::Ok();
+}
+
+Status TokenAuth::load(const std::string& path, std::unique_ptr<TokenAuth>* out) {
+  std::vector<TokenLine> lines;
+  if (Status s = readTokenLines(path, "--auth-token-file", &lines); !s.ok()) return s;
+  std::vector<std::string> tokens;
+  for (TokenLine& l : lines) {
+    if (std::string e = tokenProblem(l.token); !e.empty())
+      return Status::InvalidArgument(fmt::format("--auth-token-file {} line {}: {}", path, l.line, e));
+    tokens.push_back(std::move(l.token));
+  }
   return fromTokens(tokens, out);
 }
 

@@ -24,6 +24,17 @@
 
 namespace distband {
 
+/// One token of a token file and the line it stands on.
+struct TokenLine {
+  int line = 0;
+  std::string token;
+};
+
+/// The tokens of a file named by `flag` (--auth-token-file, --peer-token-file): one a line, surrounding whitespace
+/// trimmed, blank lines and lines starting with '#' skipped. Errors (unreadable, no token) name the flag and the
+/// file, never a token.
+Status readTokenLines(const std::string& path, const char* flag, std::vector<TokenLine>* out);
+
 class TokenAuth {
  public:
   static Status load(const std::string& path, std::unique_ptr<TokenAuth>* out);

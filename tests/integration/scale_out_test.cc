@@ -2,9 +2,12 @@
 // keeps the stream's nearest-first order, survives a replica killed mid-query, and stops every tile on a cancel.
 // The reference is one replica queried directly (itself checked against exact distances by service_test).
 #include <signal.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <fstream>
 #include <random>
 #include <string>
 #include <vector>
@@ -132,6 +135,34 @@ TEST(ScaleOutTest, ReplicasNamedHostPortAreResolvedByTheCoordinator) {
   // Every replica computed tiles (a handler reports just after its stream ends: wait for it).
   for (size_t i = 1; i < replicas.size(); ++i) EXPECT_TRUE(replicas[i]->waitRecords(1, std::chrono::seconds(2)));
   EXPECT_TRUE(replicas[0]->waitRecords(2, std::chrono::seconds(2)));
+}
+
+TEST(ScaleOutTest, TheCoordinatorSendsItsPeerTokenToReplicasThatRequireOne) {
+  const std::string token_file = ::testing::TempDir() + "scale_out_tokens_" + std::to_string(::getpid());
+  std::ofstream(token_file) << "# replicas' token\n\n  replica-token-0123456789  \n";
+  std::vector<std::unique_ptr<TestServer>> replicas;
+  std::vector<std::string> targets;
+  for (int i = 0; i < 2; ++i) {
+    ServerOptions o = TestServer::defaults();
+    o.auth_token_file = token_file;
+    replicas.push_back(std::make_unique<TestServer>(o));
+    targets.push_back(replicas.back()->target());
+  }
+  const v1::QueryRequest request = pointsRequest({{5, 5, 5}, {20, 9, 14}}, {64, 64, 32}, 0.5, 0, 3.0);
+  ServerOptions with = coordinatorOptions(targets, 32 * 32 * 32);
+  with.peer_token_file = token_file;
+  TestServer coordinator(with);
+  const Streamed ok = stream(coordinator.client(), request, -1.0f);
+  EXPECT_TRUE(ok.result.status.ok()) << ok.result.status.error_message();
+  EXPECT_GT(ok.result.summary.voxels(), 0u);
+  ServerOptions without = coordinatorOptions(targets, 32 * 32 * 32);
+  without.tile_retries = 0;
+  TestServer bare(without);
+  const Streamed refused = stream(bare.client(), request, -1.0f);
+  EXPECT_FALSE(refused.result.status.ok());
+  EXPECT_NE(refused.result.status.error_message().find("UNAUTHENTICATED"), std::string::npos)
+      << refused.result.status.error_message();
+  std::remove(token_file.c_str());
 }
 
 TEST(ScaleOutTest, PeerTargetsResolveToEveryReplica) {
