@@ -58,6 +58,9 @@ struct SeedInput {
   bool signed_distance = false;
   bool mesh = false;
   std::string description;
+  std::string sign, sign_reason;  ///< meshes: the method in force and why
+  GridPadding padding{-1, false};  ///< meshes: the padding used (-1: explicit dims)
+  std::string closest_feature;     ///< what a voxel's closest-feature id names
 };
 
 std::string buildMeshInput(const ComputeArgs& a, const Interrupter* interrupter, SeedInput* in) {
@@ -65,29 +68,37 @@ std::string buildMeshInput(const ComputeArgs& a, const Interrupter* interrupter,
   if ((a.resolution_given || a.resolution != 0) && a.resolution < 2)
     return fmt::format("--resolution must be at least 2 voxels (got {})", a.resolution);
   if ((a.resolution > 0) == a.voxel_size_given) return "--mesh needs exactly one of --resolution N or --voxel-size H";
-  if (a.padding < 0) return fmt::format("--padding must be >= 0 (got {})", a.padding);
+  if (a.padding < -1 || a.padding > kMaxPaddingVoxels)
+    return fmt::format("--padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, a.padding);
   MeshSeedOptions so;
-  if (!parseSignMethod(a.sign, &so.sign))
-    return fmt::format("--sign '{}': expected pseudonormal, winding, parity or unsigned", a.sign);
+  SignMethod sign = kDefaultMeshSign;
+  if (!parseSignMethod(a.sign, &sign))
+    return fmt::format("--sign '{}': expected auto, pseudonormal, winding, parity or unsigned", a.sign);
   const std::string mode = a.mode == "exact" ? "exact-feature" : a.mode;
   if (!parseMeshSiteMode(mode, &so.mode))
     return fmt::format("--mode '{}': expected exact-feature (or exact) or paper for a mesh", a.mode);
   TriangleMesh mesh;
   MeshReport report;
   if (std::string e = loadMesh(a.mesh, &mesh, &report); !e.empty()) return e;
+  so.sign = resolveSignMethod(sign, report, &in->sign_reason);
   MeshGridOptions go;
   go.resolution = a.resolution;
   go.voxel_size = a.voxel_size_given ? a.voxel_size : 0;
-  go.padding_voxels = a.padding;
-  if (std::string e = gridForMesh(mesh, go, &in->grid); !e.empty()) return e;
+  if (a.padding >= 0) go.padding_voxels = a.padding;
+  go.limit_world = a.limit;
+  go.limit_voxels = a.limit_voxels;
+  if (std::string e = gridForMesh(mesh, go, &in->grid, &in->padding); !e.empty()) return e;
   so.limit_voxels = a.limit_voxels > 0 ? a.limit_voxels : a.limit / in->grid.voxelSize();
   so.interrupter = interrupter;
   if (std::string e = makeMeshSeeds(in->grid, mesh, so, &in->seeds); !e.empty()) return fmt::format("{}: {}", a.mesh, e);
   in->signed_distance = so.sign != SignMethod::kUnsigned;
   in->mesh = true;
+  in->sign = std::string(signMethodName(so.sign));
+  in->closest_feature = "triangle";
   const Coord d = in->grid.dims();
-  in->description = fmt::format("mesh {} ({}; grid {}x{}x{}, sites {}, sign {})", a.mesh, report.summary(), d.x, d.y,
-                                d.z, meshSiteModeName(so.mode), signMethodName(so.sign));
+  in->description = fmt::format("mesh {} ({}; grid {}x{}x{}, padding {}, sites {}, sign {} ({}))", a.mesh,
+                                report.summary(), d.x, d.y, d.z, in->padding.voxels, meshSiteModeName(so.mode),
+                                in->sign, in->sign_reason);
   return {};
 }
 
@@ -120,6 +131,7 @@ std::string buildSeedInput(const ComputeArgs& a, const Interrupter* interrupter,
     if (std::string e = makeVolumeSeeds(in->grid, *mask, a.signed_distance, &in->seeds, interrupter); !e.empty())
       return fmt::format("{}: {}", a.volume, e);
     in->mask = mask;
+    in->closest_feature = "voxel";
     in->description = fmt::format("volume {} ({}x{}x{}, {})", a.volume, mask_dims.x, mask_dims.y, mask_dims.z,
                                   a.signed_distance ? "signed" : "unsigned");
     return {};
@@ -130,6 +142,7 @@ std::string buildSeedInput(const ComputeArgs& a, const Interrupter* interrupter,
   in->grid = Grid(origin, voxel_size, dims);
   if (std::string e = in->grid.validate(); !e.empty()) return e;
   if (std::string e = makePointSeeds(in->grid, points, &in->seeds); !e.empty()) return "--points: " + e;
+  in->closest_feature = "point";
   in->description = fmt::format("{} point{} in {}x{}x{}", points.size(), points.size() == 1 ? "" : "s", dims.x,
                                 dims.y, dims.z);
   return {};
@@ -215,6 +228,10 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
     return usage(fmt::format("--segment must be finite and >= 0 (got {})", a.segment));
   if (a.threads < 0) return usage(fmt::format("--threads must be >= 0 (got {})", a.threads));
 
+  OutputPlan plan;
+  const double limit_flag = a.limit_voxels > 0 ? std::numeric_limits<double>::quiet_NaN() : a.limit;
+  if (std::string e = checkOutputFlags(a.outputs, limit_flag, &plan); !e.empty()) return usage(e);
+
   InterruptWatch watch(ctx.interrupted);
   SeedInput in;
   if (std::string e = buildSeedInput(a, &watch.interrupter(), &in); !e.empty()) {
@@ -227,19 +244,32 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   // The limit in force, in world units (--limit-voxels needs the grid's voxel size).
   const double limit = a.limit_voxels > 0 ? a.limit_voxels * in.grid.voxelSize() : a.limit;
   options.limit_world = limit;
+  options.closest_features = plan.wants_closest();
   if (std::string e = validateOptions(in.grid, options); !e.empty()) return usage(e);
-
-  FieldLayout layout;
-  layout.grid = in.grid;
-  layout.background = std::isfinite(limit) ? float(limit) : std::numeric_limits<float>::infinity();
-  layout.signed_distance = in.signed_distance;
-  layout.inside = in.mask;
-  layout.sign_from_band = in.mesh && in.signed_distance;
-  std::unique_ptr<BrickSink> sink;
-  if (std::string e = openBrickSink(a.out, layout, &sink); !e.empty()) return usage("--out " + e);
-  if (!a.meta.empty() && std::filesystem::is_directory(a.meta)) return usage("--meta " + a.meta + ": is a directory");
+  if (in.padding.band_clipped)
+    ctx.err << fmt::format("distband compute: warning: the band is clipped at the grid's faces: padding {} voxels < "
+                           "limit {:g} voxels{}\n",
+                           in.padding.voxels, limit / in.grid.voxelSize(),
+                           a.padding >= 0 ? " (--padding)" : "; give a larger --resolution or --padding");
 
   const StencilKind stencil = options.stencil.value_or(defaultStencil(in.seeds.kind));
+  FieldDescription field;
+  field.grid = in.grid;
+  field.limit_world = limit;
+  field.signed_distance = in.signed_distance;
+  field.inside = in.mask;
+  field.sign_from_band = in.mesh && in.signed_distance;
+  field.stencil = std::string(stencilName(stencil));
+  field.mode = std::string(modeName(options.mode));
+  if (in.signed_distance) field.sign = in.mesh ? in.sign : "mask-inside";
+  field.sign_reason = in.sign_reason;
+  field.padding_voxels = in.padding.voxels;
+  field.band_clipped = in.padding.band_clipped;
+  field.segment_length_world = a.segment;
+  field.closest_feature = in.closest_feature;
+  FieldOutputs outputs(plan);
+  if (std::string e = outputs.open(field); !e.empty()) return usage(e);
+
   ctx.out << fmt::format("distband compute: {}, voxel size {:g}, stencil {}, mode {}, segment {}, limit {}, threads {}\n",
                          in.description, in.grid.voxelSize(), stencilName(stencil), modeName(options.mode),
                          a.segment > 0 ? fmt::format("{:g}", a.segment) : std::string("none"),
@@ -249,17 +279,22 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
 
   options.interrupter = &watch.interrupter();
   auto t_segment = Clock::now();
+  int64_t committed_voxels = 0;
   EngineResult result;
   try {
     result = computeDistanceField(in.grid, std::move(in.seeds), options, [&](SegmentBricks&& seg) {
       int64_t voxels = 0;
       for (const Brick& b : seg.bricks) voxels += b.mask.count();
-      sink->add(seg);
       ctx.out << fmt::format("segment {:>3}  {:<18} voxels {:>11}  bricks {:>8}  {:8.3f} s\n", seg.index,
                              rangeText(seg.index, seg.lower_world, seg.upper_world), voxels, seg.bricks.size(),
                              secondsSince(t_segment));
       ctx.out.flush();
       t_segment = Clock::now();
+      const bool complete = seg.complete;
+      const double upper = seg.upper_world;
+      outputs.add(std::move(seg));
+      if (complete) outputs.commitSegment(upper);
+      committed_voxels += voxels;
     });
   } catch (const std::invalid_argument& e) {
     return usage(e.what());
@@ -268,38 +303,34 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
     return kExitFailure;
   }
   const double engine_seconds = secondsSince(t_start);
+  const auto t_write = Clock::now();
+  RunOutcome run;
+  run.complete = !result.interrupted;
+  run.voxels = result.interrupted ? committed_voxels : result.voxels;
+  run.seconds = result.seconds;
+  std::vector<std::string> wrote;
+  const std::string error = outputs.finish(run, &wrote);
+  for (const std::string& line : wrote) ctx.out << line << "\n";
   if (result.interrupted) {
-    ctx.err << "distband compute: interrupted; nothing written\n";
+    if (!error.empty())
+      ctx.err << "distband compute: interrupted; " << error << "\n";
+    else
+      ctx.err << fmt::format("distband compute: interrupted; kept the {} complete segment{} (every voxel with "
+                             "|distance| <= {:g}), marked complete=false\n",
+                             outputs.committedSegments(), outputs.committedSegments() == 1 ? "" : "s",
+                             outputs.completeUpTo());
     return kExitInterrupted;
   }
-  const auto t_write = Clock::now();
-  if (std::string e = sink->finish(); !e.empty()) {
-    ctx.err << "distband compute: " << e << "\n";
+  if (!error.empty()) {
+    ctx.err << "distband compute: " << error << "\n";
     return kExitFailure;
-  }
-  if (!a.meta.empty()) {
-    FieldMetadata meta;
-    meta.grid = in.grid;
-    meta.data_file = std::filesystem::path(a.out).filename().string();
-    meta.signed_distance = in.signed_distance;
-    meta.limit_world = limit;
-    meta.background_world = layout.background;
-    meta.stencil = std::string(stencilName(stencil));
-    meta.mode = std::string(modeName(options.mode));
-    meta.segment_length_world = a.segment;
-    meta.voxels_delivered = result.voxels;
-    meta.seconds = result.seconds;
-    if (std::string e = writeFieldMetadata(a.meta, meta); !e.empty()) {
-      ctx.err << "distband compute: " << e << "\n";
-      return kExitFailure;
-    }
   }
   ctx.out << fmt::format(
       "done: {} voxels in {} segment{}, {} steps, {} updates, {} corrections, {} bricks allocated; engine {:.3f} s, "
-      "total {:.3f} s (write {:.3f} s)\nwrote {}{}\n",
+      "total {:.3f} s (write {:.3f} s)\n",
       result.voxels, result.segments.size(), result.segments.size() == 1 ? "" : "s", result.steps, result.updates,
       result.corrections, result.bricks_allocated, result.seconds, engine_seconds + secondsSince(t_write),
-      secondsSince(t_write), sink->description(), a.meta.empty() ? "" : " and " + a.meta);
+      secondsSince(t_write));
   return kExitOk;
 }
 
@@ -316,8 +347,12 @@ CliCommand registerComputeCommand(CLI::App& app, const CliContext& context) {
   mesh->excludes(volume);
   mesh->excludes(points);
   cmd->add_option("--resolution", args->resolution, "Mesh: voxels along the longest side of the padded box (N^3)");
-  cmd->add_option("--padding", args->padding, "Mesh: margin around the mesh in voxels")->default_val(3);
-  cmd->add_option("--sign", args->sign, "Mesh: pseudonormal | winding | parity | unsigned")->default_val("pseudonormal");
+  cmd->add_option("--padding", args->padding,
+                  "Mesh: margin around the mesh in voxels (default: at least 3 and at least the limit)");
+  cmd->add_option("--sign", args->sign,
+                  "Mesh: auto (pseudonormal for a closed mesh, winding for an open one) | pseudonormal | winding | "
+                  "parity | unsigned")
+      ->default_val("auto");
   cmd->add_flag("--second-ring", args->second_ring, "Mesh: also run the engine's second-ring correction (slower)");
   cmd->add_option("--voxel-size", args->voxel_size, "Voxel size in world units (default 1; meshes: or --resolution)")
       ->default_val(1.0);
@@ -333,9 +368,7 @@ CliCommand registerComputeCommand(CLI::App& app, const CliContext& context) {
   cmd->add_option("--limit-voxels", args->limit_voxels, "Distance limit in voxels of the grid (instead of --limit)")
       ->excludes(limit);
   cmd->add_option("--threads", args->threads, "Worker threads (0: all cores)")->default_val(0);
-  cmd->add_option("--out", args->out, "Output file: .npy (dense float32, shape (Z, Y, X)) or .vdb (OpenVDB level set)")
-      ->required();
-  cmd->add_option("--meta", args->meta, "Also write a JSON description of the field (grid, units, limit, sign)");
+  addOutputFlags(cmd, &args->outputs);
   return {cmd, [args, &context, cmd]() {
             args->voxel_size_given = cmd->count("--voxel-size") > 0;
             args->resolution_given = cmd->count("--resolution") > 0;

@@ -13,6 +13,14 @@ namespace {
 
 double megabytes(uint64_t bytes) { return double(bytes) / 1e6; }
 
+// "950", "12.3k", "4.56M", "1.2G".
+std::string compactCount(int64_t n) {
+  if (n < 1000) return fmt::format("{}", n);
+  if (n < 1000000) return fmt::format("{:.3g}k", n / 1e3);
+  if (n < 1000000000) return fmt::format("{:.3g}M", n / 1e6);
+  return fmt::format("{:.3g}G", n / 1e9);
+}
+
 int initialEstimate(double limit, double segment_length) {
   if (!(segment_length > 0) || !std::isfinite(segment_length)) return std::isfinite(limit) ? 1 : 0;
   if (!std::isfinite(limit) || !(limit > 0)) return 0;
@@ -69,9 +77,10 @@ void ProgressDisplay::print(const std::string& line) {
   std::fflush(options_.out);
 }
 
-void ProgressDisplay::onData(int64_t bricks, uint64_t bytes) {
+void ProgressDisplay::onData(int64_t bricks, int64_t voxels, uint64_t bytes) {
   if (finished_) return;
   pending_bricks_ += std::max<int64_t>(0, bricks);
+  pending_voxels_ += std::max<int64_t>(0, voxels);
   pending_bytes_ += bytes;
   if (mode_ != ProgressMode::kTerminal) return;
   const double t = now();
@@ -81,6 +90,7 @@ void ProgressDisplay::onData(int64_t bricks, uint64_t bytes) {
 void ProgressDisplay::onSegment(const SegmentProgress& s) {
   if (finished_) return;
   pending_bricks_ = 0;
+  pending_voxels_ = 0;
   pending_bytes_ = 0;
   bricks_ += s.bricks;
   voxels_ += s.voxels;
@@ -97,10 +107,9 @@ void ProgressDisplay::onSegment(const SegmentProgress& s) {
   } else if (mode_ == ProgressMode::kPlain) {
     const double elapsed = t - start_;
     std::string eta;
-    if (s.last)
-      eta = "";
-    else if (estimate_ > 0)
-      eta = fmt::format(", ETA ~{}", formatDuration(elapsed * (estimate_ - done_) / done_));
+    if (const double left = etaSeconds(elapsed); !s.last && left >= 0)
+      eta = fmt::format(", ETA {}{}", options_.expected_voxels > 0 ? "" : "~", formatDuration(left));
+    if (options_.expected_voxels > 0) eta = fmt::format(", {:.0f}% of expected voxels", 100 * fraction()) + eta;
     print(fmt::format("segment {}/{} ({:.4g}, {:.4g}]: {} bricks, {} voxels, {:.2f} MB | total {} bricks, "
                       "{:.2f} MB, {} elapsed{}\n",
                       s.index + 1, estimate_ > 0 ? fmt::format("{}", estimate_) : std::string("?"),
@@ -109,12 +118,29 @@ void ProgressDisplay::onSegment(const SegmentProgress& s) {
   }
 }
 
+double ProgressDisplay::fraction() const {
+  const bool all_done = estimate_ > 0 && done_ >= estimate_;
+  if (options_.expected_voxels > 0)
+    return all_done ? 1.0 : std::min(0.99, double(totalVoxels()) / double(options_.expected_voxels));
+  return estimate_ > 0 ? std::min(1.0, double(done_) / estimate_) : 0.0;
+}
+
+double ProgressDisplay::etaSeconds(double elapsed) const {
+  if (options_.expected_voxels > 0) {
+    const int64_t got = totalVoxels();
+    if (got <= 0 || got >= options_.expected_voxels) return -1;
+    return elapsed * double(options_.expected_voxels - got) / double(got);
+  }
+  if (estimate_ > 0 && done_ > 0 && done_ < estimate_) return elapsed * (estimate_ - done_) / done_;
+  return -1;
+}
+
 void ProgressDisplay::redraw(double t) {
   last_redraw_ = t;
   const double elapsed = t - start_;
   std::string bar;
   if (options_.bar_width > 0) {
-    const double frac = estimate_ > 0 ? std::min(1.0, double(done_) / estimate_) : 0.0;
+    const double frac = fraction();
     const int filled = int(frac * options_.bar_width);
     bar.reserve(size_t(options_.bar_width) + 3);
     bar.push_back('[');
@@ -123,10 +149,17 @@ void ProgressDisplay::redraw(double t) {
     bar.append("] ");
   }
   std::string eta;
-  if (estimate_ > 0 && done_ > 0 && done_ < estimate_)
-    eta = "  ETA ~" + formatDuration(elapsed * (estimate_ - done_) / done_);
-  print(fmt::format("\r{}segment {}/{}  {} bricks  {:.1f} MB  {}{}\x1b[K", bar, done_,
-                    estimate_ > 0 ? fmt::format("{}", estimate_) : std::string("?"), totalBricks(),
+  const bool all_done = estimate_ > 0 && done_ >= estimate_;
+  if (!all_done && (totalVoxels() > 0 || done_ > 0)) {
+    const double left = etaSeconds(elapsed);
+    eta = fmt::format("  ETA {}{}", options_.expected_voxels > 0 || left < 0 ? "" : "~", formatDuration(left));
+  }
+  const std::string voxels = options_.expected_voxels > 0
+                                 ? fmt::format("{}/{} voxels", compactCount(totalVoxels()),
+                                               compactCount(options_.expected_voxels))
+                                 : fmt::format("{} voxels", compactCount(totalVoxels()));
+  print(fmt::format("\r{}segment {}/{}  {}  {:.1f} MB  {}{}\x1b[K", bar, done_,
+                    estimate_ > 0 ? fmt::format("{}", estimate_) : std::string("?"), voxels,
                     megabytes(totalBytes()), formatDuration(elapsed), eta));
   line_open_ = true;
 }
@@ -146,7 +179,7 @@ void ProgressDisplay::finish(bool ok, std::string_view message) {
   std::string line = ok ? "done" : "stopped";
   if (!message.empty()) line += fmt::format(" ({})", message);
   line += fmt::format(": {} segments, {} bricks, {} voxels, {:.2f} MB in {} ({:.1f} MB/s)\n", done_,
-                      totalBricks(), voxels_, megabytes(totalBytes()), formatDuration(elapsed), rate);
+                      totalBricks(), totalVoxels(), megabytes(totalBytes()), formatDuration(elapsed), rate);
   print(line);
 }
 

@@ -162,6 +162,7 @@ RemoteQueryResult RemoteClient::query(const v1::QueryRequest& request, const Rem
   };
   v1::QueryReply reply;
   v1::BrickEncoding encoding = v1::BRICK_ENCODING_FLOAT32;
+  v1::ClosestFeature closest = v1::CLOSEST_FEATURE_NONE;
   int expected_segment = 0;
   while (reader->Read(&reply)) {
     ++result.messages;
@@ -176,7 +177,10 @@ RemoteQueryResult RemoteClient::query(const v1::QueryRequest& request, const Rem
         result.header = reply.header();
         result.grid = gridFromHeader(reply.header());
         encoding = reply.header().encoding();
+        closest = reply.header().closest_feature();
         if (std::string e = result.grid.validate(); !e.empty()) protocol_error = "header grid: " + e;
+        else if (!v1::ClosestFeature_IsValid(closest))
+          protocol_error = fmt::format("header closest_feature {} is not a ClosestFeature value", int(closest));
         else if (cb.on_header) go_on = cb.on_header(result.grid, result.header);
         break;
       case v1::QueryReply::kBricks: {
@@ -198,8 +202,8 @@ RemoteQueryResult RemoteClient::query(const v1::QueryRequest& request, const Rem
         batch.bricks.resize(size_t(b.bricks_size()));
         uint64_t bytes = 0;
         for (int i = 0; i < b.bricks_size() && protocol_error.empty(); ++i) {
-          protocol_error = decodeBrick(b.bricks(i), encoding, &batch.bricks[size_t(i)]);
-          bytes += b.bricks(i).values().size() + b.bricks(i).mask().size();
+          protocol_error = decodeBrick(b.bricks(i), encoding, &batch.bricks[size_t(i)], closest);
+          bytes += b.bricks(i).values().size() + b.bricks(i).mask().size() + b.bricks(i).closest().size();
         }
         result.wire_bytes += bytes;
         if (protocol_error.empty() && cb.on_bricks) go_on = cb.on_bricks(std::move(batch), bytes);

@@ -13,6 +13,7 @@
 
 #include "client/brick_sink.h"
 #include "client/compute_command.h"
+#include "client/field_outputs.h"
 #include "client/progress.h"
 #include "client/remote_client.h"
 #include "client/remote_connection.h"
@@ -36,9 +37,7 @@ struct QueryArgs {
   double limit = 0;
   double limit_voxels = 0;
   double deadline_s = 0;
-  std::string out, npy;
-  std::vector<std::string> slice_png;   ///< AXIS:INDEX PNG
-  std::vector<std::string> isosurface;  ///< D OBJ
+  OutputFlags outputs;
 };
 
 /// The client for a subcommand's connection flags, or "" and a message naming the flag.
@@ -87,6 +86,34 @@ bool pick(const std::string& text, std::initializer_list<std::pair<const char*, 
       return true;
     }
   return false;
+}
+
+std::string signName(v1::SignMode sign) {
+  switch (sign) {
+    case v1::SIGN_MODE_PSEUDONORMAL: return "pseudonormal";
+    case v1::SIGN_MODE_WINDING: return "winding";
+    case v1::SIGN_MODE_PARITY: return "parity";
+    case v1::SIGN_MODE_MASK_INSIDE: return "mask-inside";
+    default: return "unsigned";
+  }
+}
+
+std::string stencilText(v1::Stencil stencil) {
+  switch (stencil) {
+    case v1::STENCIL_CUBIC6: return "cubic6";
+    case v1::STENCIL_CUBIC18: return "cubic18";
+    case v1::STENCIL_FCC12: return "fcc12";
+    default: return "cubic26";
+  }
+}
+
+std::string closestText(v1::ClosestFeature closest) {
+  switch (closest) {
+    case v1::CLOSEST_FEATURE_TRIANGLE: return "triangle";
+    case v1::CLOSEST_FEATURE_POINT: return "point";
+    case v1::CLOSEST_FEATURE_VOXEL: return "voxel";
+    default: return "";
+  }
 }
 
 void setVec(v1::Vec3* v, const Vec3d& p) {
@@ -166,10 +193,10 @@ std::string buildRequest(const QueryArgs& a, RemoteClient& client, const CliCont
   r->set_mode(mode);
   if (!a.sign.empty()) {
     v1::SignMode sign;
-    if (!pick(a.sign, {{"unsigned", v1::SIGN_MODE_UNSIGNED}, {"pseudonormal", v1::SIGN_MODE_PSEUDONORMAL},
-                       {"winding", v1::SIGN_MODE_WINDING}, {"parity", v1::SIGN_MODE_PARITY},
-                       {"mask-inside", v1::SIGN_MODE_MASK_INSIDE}}, &sign))
-      return fmt::format("--sign '{}': expected pseudonormal, winding, parity, unsigned or mask-inside", a.sign);
+    if (!pick(a.sign, {{"auto", v1::SIGN_MODE_AUTO}, {"unsigned", v1::SIGN_MODE_UNSIGNED},
+                       {"pseudonormal", v1::SIGN_MODE_PSEUDONORMAL}, {"winding", v1::SIGN_MODE_WINDING},
+                       {"parity", v1::SIGN_MODE_PARITY}, {"mask-inside", v1::SIGN_MODE_MASK_INSIDE}}, &sign))
+      return fmt::format("--sign '{}': expected auto, pseudonormal, winding, parity, unsigned or mask-inside", a.sign);
     r->set_sign(sign);
   }
   v1::BrickEncoding enc;
@@ -179,6 +206,7 @@ std::string buildRequest(const QueryArgs& a, RemoteClient& client, const CliCont
   r->set_segment_length(a.segment);
   r->set_limit(a.limit);
   r->set_limit_voxels(a.limit_voxels);
+  r->set_closest_feature(!a.outputs.closest.empty());
   return {};
 }
 
@@ -188,44 +216,13 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
     return kExitUsage;
   };
   // Validate every flag and output path before any network traffic, naming the flag.
-  if (a.out.empty() && a.npy.empty() && a.slice_png.empty() && a.isosurface.empty())
-    return usage("nothing to write: give --out, --npy, --slice-png or --isosurface");
-  const bool out_vdb = a.out.size() > 4 && a.out.substr(a.out.size() - 4) == ".vdb";
-  const bool out_npy = a.out.size() > 4 && a.out.substr(a.out.size() - 4) == ".npy";
-  if (!a.out.empty())
-    if (std::string e = checkOutputPath("--out", a.out, {".vdb", ".npy"}); !e.empty()) return usage(e);
-  if (!a.npy.empty())
-    if (std::string e = checkOutputPath("--npy", a.npy, {".npy"}); !e.empty()) return usage(e);
-  const std::string npy_path = out_npy ? a.out : a.npy;
-  const bool need_vdb = out_vdb || !a.slice_png.empty() || !a.isosurface.empty();
   if (a.limit_voxels != 0 && !(a.limit_voxels > 0 && std::isfinite(a.limit_voxels)))
     return usage(fmt::format("--limit-voxels must be finite and > 0 (got {})", a.limit_voxels));
-  const bool finite_limit = (a.limit > 0 && std::isfinite(a.limit)) || a.limit_voxels > 0;
-  if (need_vdb && !finite_limit)
-    return usage("a .vdb, --slice-png or --isosurface needs a finite --limit or --limit-voxels (the level set's "
-                 "background)");
-  SliceSpec slice;
-  if (!a.slice_png.empty()) {
-    if (a.slice_png.size() != 2) return usage("--slice-png takes AXIS:INDEX and a PNG path");
-    if (std::string e = parseSliceSpec(a.slice_png[0], &slice); !e.empty()) return usage("--slice-png: " + e);
-    if (std::string e = checkOutputPath("--slice-png", a.slice_png[1], {".png"}); !e.empty()) return usage(e);
-  }
-  double iso = 0;
-  if (!a.isosurface.empty()) {
-    if (a.isosurface.size() != 2) return usage("--isosurface takes a distance D and an OBJ path");
-    try {
-      size_t used = 0;
-      iso = std::stod(a.isosurface[0], &used);
-      if (used != a.isosurface[0].size() || !std::isfinite(iso)) throw std::invalid_argument("x");
-    } catch (const std::exception&) {
-      return usage(fmt::format("--isosurface: '{}' is not a finite number", a.isosurface[0]));
-    }
-    if (a.limit_voxels == 0 && !(std::abs(iso) < a.limit))  // in voxels: checked once the header gives the size
-      return usage(fmt::format("--isosurface {:g}: the surface must lie inside --limit {:g} (beyond it the field "
-                               "holds only the background)",
-                               iso, a.limit));
-    if (std::string e = checkOutputPath("--isosurface", a.isosurface[1], {".obj"}); !e.empty()) return usage(e);
-  }
+  OutputPlan plan;
+  const double limit_world = a.limit_voxels > 0 ? std::numeric_limits<double>::quiet_NaN()
+                             : a.limit > 0      ? a.limit
+                                                : std::numeric_limits<double>::infinity();
+  if (std::string e = checkOutputFlags(a.outputs, limit_world, &plan); !e.empty()) return usage(e);
   if (!a.mesh.empty()) {  // the upload reads it only after connecting: check it is there now
     std::error_code ec;
     if (!std::filesystem::is_regular_file(a.mesh, ec))
@@ -253,8 +250,7 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
     return exitCodeOf(status);
   }
 
-  std::unique_ptr<VdbFieldBuilder> vdb;
-  std::unique_ptr<BrickSink> npy;
+  FieldOutputs outputs(plan);
   std::unique_ptr<ProgressDisplay> progress;
   std::string setup_error;
   RemoteQueryCallbacks cb;
@@ -263,44 +259,54 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
                            h.query_id(), grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
                            grid.origin().x, grid.origin().y, grid.origin().z, h.limit(),
                            h.signed_() ? "signed" : "unsigned");
-    if (!a.isosurface.empty() && !(std::abs(iso) < h.limit())) {
-      setup_error = fmt::format("--isosurface {:g}: the surface must lie inside the limit {:g} (--limit-voxels {:g})",
-                                iso, h.limit(), a.limit_voxels);
+    const std::string sign = signName(h.sign());
+    if (h.sign() != v1::SIGN_MODE_UNSIGNED || h.sign_reason().rfind("auto", 0) == 0)
+      ctx.out << fmt::format("sign: {} ({})\n", sign, h.sign_reason());
+    if (h.band_clipped())
+      ctx.err << fmt::format("distband query: warning: the band is clipped at the grid's faces: padding {} voxels < "
+                             "limit {:g} voxels{}\n",
+                             h.padding(), h.limit() / grid.voxelSize(),
+                             a.padding >= 0 ? " (--padding)" : "; give a larger --resolution or --padding");
+    FieldDescription field;
+    field.grid = grid;
+    field.limit_world = h.limit();
+    field.signed_distance = h.signed_();
+    field.sign_from_band = h.signed_();  // no inside labels on the client: signs come from the delivered band
+    field.stencil = stencilText(h.stencil());
+    field.mode = h.mode() == v1::PROPAGATION_MODE_PAPER ? "paper" : "exact";
+    if (h.signed_()) field.sign = sign;
+    field.sign_reason = h.sign_reason();
+    field.padding_voxels = a.dims.empty() ? int(h.padding()) : -1;
+    field.band_clipped = h.band_clipped();
+    field.segment_length_world = h.segment_length();
+    field.closest_feature = closestText(h.closest_feature());
+    if (std::string e = outputs.open(field); !e.empty()) {
+      setup_error = a.limit_voxels > 0 && e.rfind("--isosurface", 0) == 0
+                        ? fmt::format("{} (--limit-voxels {:g})", e, a.limit_voxels)
+                        : e;
       return false;
     }
-    if (need_vdb) vdb = std::make_unique<VdbFieldBuilder>(grid, float(h.limit()));
-    if (!npy_path.empty()) {
-      FieldLayout layout;
-      layout.grid = grid;
-      layout.background = float(h.limit());
-      layout.signed_distance = h.signed_();
-      layout.sign_from_band = h.signed_();  // no inside labels on the client: signs come from the delivered band
-      if (std::string e = openBrickSink(npy_path, layout, &npy); !e.empty()) {
-        setup_error = e;
-        return false;
-      }
-    }
-    if (!a.slice_png.empty())
-      if (std::string e = resolveSlice(grid, &slice); !e.empty()) {
-        setup_error = "--slice-png: " + e;
-        return false;
-      }
     ProgressOptions po;
     po.mode = pmode;
     po.limit_world = h.limit();
     po.segment_length_world = h.segment_length();
+    po.expected_voxels = int64_t(h.expected_voxels());
     progress = std::make_unique<ProgressDisplay>(po);
     return true;
   };
   uint64_t segment_bytes = 0;
+  int64_t committed_voxels = 0;
   cb.on_bricks = [&](SegmentBricks&& batch, uint64_t bytes) {
     segment_bytes += bytes;
-    if (vdb) vdb->add(batch);
-    if (npy) npy->add(batch);
-    progress->onData(int64_t(batch.bricks.size()), bytes);
+    int64_t voxels = 0;
+    for (const Brick& b : batch.bricks) voxels += b.mask.count();
+    progress->onData(int64_t(batch.bricks.size()), voxels, bytes);
+    outputs.add(std::move(batch));
     return true;
   };
   cb.on_segment_done = [&](const v1::SegmentDone& d) {
+    outputs.commitSegment(d.upper());
+    committed_voxels += int64_t(d.voxels());
     SegmentProgress sp;
     sp.index = int(d.segment());
     sp.lower_world = d.lower();
@@ -340,7 +346,21 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
   if (!result.status.ok()) {
     if (progress) progress->finish(false, describe(result.status));
     if (canceller.cancelled()) {
-      ctx.err << "distband query: interrupted; the server stopped the query and nothing was written\n";
+      // Ctrl-C: the server stopped; keep every complete segment received (marked incomplete), drop the rest.
+      RunOutcome run;
+      run.complete = false;
+      run.voxels = committed_voxels;
+      run.seconds = result.total_seconds;
+      std::vector<std::string> wrote;
+      const std::string e = result.have_header ? outputs.finish(run, &wrote) : "nothing arrived: nothing written";
+      for (const std::string& line : wrote) ctx.out << line << "\n";
+      if (!e.empty())
+        ctx.err << "distband query: interrupted; " << e << "\n";
+      else
+        ctx.err << fmt::format("distband query: interrupted; kept the {} complete segment{} received (every voxel "
+                               "with |distance| <= {:g}), marked complete=false\n",
+                               outputs.committedSegments(), outputs.committedSegments() == 1 ? "" : "s",
+                               outputs.completeUpTo());
       return kExitInterrupted;
     }
     ctx.err << "distband query: " << describe(result.status) << "\n";
@@ -358,42 +378,17 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
       "client: first bricks after {:.3f}s, done after {:.3f}s\n",
       s.voxels(), s.bricks(), result.messages, result.wire_bytes / 1e6, s.seed_seconds(), s.compute_seconds(),
       s.total_seconds(), result.first_bricks_seconds, result.total_seconds);
-
-  int code = kExitOk;
-  auto fail = [&](const std::string& what) {
-    ctx.err << "distband query: " << what << "\n";
-    code = kExitFailure;
-  };
-  if (npy) {
-    if (std::string e = npy->finish(); !e.empty()) fail(e);
-    else ctx.out << "wrote " << npy->description() << "\n";
+  RunOutcome run;
+  run.voxels = int64_t(s.voxels());
+  run.seconds = s.total_seconds();
+  std::vector<std::string> wrote;
+  const std::string e = outputs.finish(run, &wrote);
+  for (const std::string& line : wrote) ctx.out << line << "\n";
+  if (!e.empty()) {
+    ctx.err << "distband query: " << e << "\n";
+    return kExitFailure;
   }
-  if (vdb) {
-    vdb->finish();
-    if (out_vdb) {
-      if (std::string e = vdb->write(a.out); !e.empty()) fail(e);
-      else ctx.out << fmt::format("wrote {} (OpenVDB level set, {} active voxels)\n", a.out, vdb->activeVoxels());
-    }
-    auto grid = std::static_pointer_cast<openvdb::FloatGrid>(vdb->gridHandle());
-    if (!a.slice_png.empty()) {
-      auto acc = grid->getConstAccessor();
-      const VoxelSampler sample = [&](const Coord& c) { return acc.getValue(openvdb::Coord(c.x, c.y, c.z)); };
-      SlicePngOptions so;
-      so.limit_world = result.header.limit();
-      if (std::string e = writeSlicePng(a.slice_png[1], result.grid, sample, slice, so); !e.empty()) fail(e);
-      else ctx.out << "wrote " << a.slice_png[1] << " (slice " << a.slice_png[0] << ")\n";
-    }
-    if (!a.isosurface.empty()) {
-      TriangleMeshF mesh;
-      IsosurfaceOptions io;
-      io.distance_world = iso;
-      if (std::string e = writeIsosurfaceObj(a.isosurface[1], *grid, io, &mesh); !e.empty()) fail(e);
-      else
-        ctx.out << fmt::format("wrote {} (isosurface at {:g}: {} vertices, {} triangles)\n", a.isosurface[1], iso,
-                               mesh.vertices.size(), mesh.triangles.size());
-    }
-  }
-  return code;
+  return kExitOk;
 }
 
 CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
@@ -405,7 +400,8 @@ CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
   cmd->add_option("--volume", args->volume, "Seed mask .npy (uint8/bool, shape (Z, Y, X)), uploaded first");
   cmd->add_option("--asset", args->asset, "A previously uploaded asset id");
   cmd->add_option("--resolution", args->resolution, "Voxels along the longest side (the paper's N^3)");
-  cmd->add_option("--padding", args->padding, "Margin around the seeds' bounds, voxels (server default 3)");
+  cmd->add_option("--padding", args->padding,
+                  "Margin around the seeds' bounds, voxels (default: at least 3 and at least the limit)");
   cmd->add_option("--voxel-size", args->voxel_size, "Voxel size in world units");
   cmd->add_option("--dims", args->dims, "Explicit grid dims X,Y,Z (with --voxel-size; volumes: the mask's)");
   cmd->add_option("--origin", args->origin, "World position of voxel (0,0,0) with --dims: x,y,z");
@@ -416,7 +412,8 @@ CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
       ->capture_default_str();
   cmd->add_option("--mode", args->mode, "exact (exact-feature for meshes) | paper")->capture_default_str();
   cmd->add_option("--sign", args->sign,
-                  "pseudonormal | winding | parity | unsigned (meshes), mask-inside | unsigned (volumes)");
+                  "auto (default: pseudonormal for closed meshes, winding for open ones) | pseudonormal | winding | "
+                  "parity | unsigned (meshes); unsigned (default) | mask-inside (volumes)");
   cmd->add_option("--segment", args->segment, "Segment length in world units (0: one segment)");
   CLI::Option* limit = cmd->add_option("--limit", args->limit, "Distance limit in world units (0: none)");
   cmd->add_option("--limit-voxels", args->limit_voxels, "Distance limit in voxels of the grid (instead of --limit)")
@@ -424,12 +421,7 @@ CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
   cmd->add_option("--encoding", args->encoding, "float32 | float16")->capture_default_str();
   cmd->add_option("--deadline", args->deadline_s, "Give up after this many seconds (0: never)");
   cmd->add_option("--progress", args->progress, "auto | plain | terminal | quiet")->capture_default_str();
-  cmd->add_option("--out", args->out, "Output: FIELD.vdb (OpenVDB level set) or FIELD.npy (dense float32)");
-  cmd->add_option("--npy", args->npy, "Also write a dense float32 .npy (small grids)");
-  cmd->add_option("--slice-png", args->slice_png, "AXIS:INDEX PNG — a colour-mapped slice with the zero contour")
-      ->expected(2);
-  cmd->add_option("--isosurface", args->isosurface, "D OBJ — the surface at distance D as a Wavefront OBJ")
-      ->expected(2);
+  addOutputFlags(cmd, &args->outputs);
   return {cmd, [args, &ctx] { return runQuery(*args, ctx); }};
 }
 

@@ -40,6 +40,9 @@ struct Brick {
   Coord origin;
   std::array<float, kBrickVoxels> values{};
   BrickMask mask;
+  /// Closest-feature ids of the masked voxels (EngineOptions::closest_features; see Seeds::FeatureKind), indexed
+  /// like `values`; empty when not requested.
+  std::vector<int64_t> closest;
 };
 
 /// The bricks finished by one segment of the propagation (or a chunk of them), delivered nearest-first. Every voxel

@@ -357,6 +357,7 @@ class BandRun {
   bool emitSegment(int index, double lower_vox, double upper_vox, bool nothing_deferred, SegmentStats& stats);
   void buildChunk(size_t c0, size_t c1, const std::vector<uint32_t>& slot, const std::vector<uint8_t>& keep,
                   uint32_t base, bool triangles, std::vector<Brick>& out);
+  int64_t closestFeature(uint32_t site, const Coord& voxel) const;
   void rearmLifespans();
   void releaseBricks();
   void collectPending();
@@ -981,6 +982,18 @@ bool BandRun::emitSegment(int index, double lower_vox, double upper_vox, bool no
   return last;
 }
 
+// The closest-feature id of a delivered voxel holding `site` (see Seeds::FeatureKind).
+int64_t BandRun::closestFeature(uint32_t site, const Coord& voxel) const {
+  if (seeds_.feature_kind == Seeds::FeatureKind::kSiteVoxel) {
+    if (site == kNoSite) return grid_.denseIndex(voxel);  // inside the seed volume: its own feature
+    const Vec3d& p = seeds_.points[site];
+    const Coord o = seeds_.site_offset;
+    return grid_.denseIndex({int(std::lround(p.x)) - o.x, int(std::lround(p.y)) - o.y, int(std::lround(p.z)) - o.z});
+  }
+  if (site == kNoSite) return -1;
+  return seeds_.site_feature.empty() ? int64_t(site) : int64_t(seeds_.site_feature[site]);
+}
+
 // Builds the output bricks of pending bricks [c0, c1) into `out` (out[slot - 1 - base]) and marks them delivered.
 void BandRun::buildChunk(size_t c0, size_t c1, const std::vector<uint32_t>& slot, const std::vector<uint8_t>& keep,
                          uint32_t base, bool triangles, std::vector<Brick>& out) {
@@ -994,6 +1007,7 @@ void BandRun::buildChunk(size_t c0, size_t c1, const std::vector<uint32_t>& slot
       if (!slot[i]) continue;
       Brick& brick = out[slot[i] - 1 - base];
       brick.origin = b->origin;
+      if (opt_.closest_features) brick.closest.assign(kBrickVoxels, -1);
       for (int off = 0; off < kBrickVoxels; ++off) {
         const uint64_t k = b->key[off].load(std::memory_order_relaxed);
         sites[off] = kNoSite;
@@ -1007,6 +1021,7 @@ void BandRun::buildChunk(size_t c0, size_t c1, const std::vector<uint32_t>& slot
         const double d2 = triangles ? double(keyDist2(k)) : metric_.dist2(s, c.x, c.y, c.z);
         brick.values[off] = float(std::sqrt(d2) * h);
         brick.mask.set(off);
+        if (opt_.closest_features) brick.closest[off] = closestFeature(sites[off], c);
       }
       for (size_t w = 0; w < brick.mask.words.size(); ++w)
         b->emitted.words[w].fetch_or(brick.mask.words[w], std::memory_order_relaxed);

@@ -70,6 +70,8 @@ struct EngineOptions {
   int lifespan_margin = -1;
   const Interrupter* interrupter = nullptr;  ///< polled in every phase; may be null
   size_t max_chunk_bricks = 0;               ///< > 0: hand segments over in chunks of at most this many bricks
+  /// Also report each delivered voxel's closest feature (Brick::closest; what the ids mean: Seeds::FeatureKind).
+  bool closest_features = false;
 };
 
 struct SegmentStats {

@@ -64,7 +64,8 @@ FieldMemoryEstimate estimateFieldMemory(const FieldMemoryInput& in) {
   const double chunk_bricks = in.chunk_bricks ? std::min(double(in.chunk_bricks), touched_bricks) : touched_bricks;
   e.engine_bytes = uint64_t(engine * kSafety) + kFixedBytes;
   e.seed_bytes = uint64_t(seeds * kSafety);
-  e.output_bytes = uint64_t((chunk_bricks + 1) * kOutputBytesPerBrick * kSafety);
+  const double closest_bytes = in.closest_features ? kBrickVoxels * sizeof(int64_t) : 0;
+  e.output_bytes = uint64_t((chunk_bricks + 1) * (kOutputBytesPerBrick + closest_bytes) * kSafety);
   return e;
 }
 

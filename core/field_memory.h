@@ -37,6 +37,7 @@ struct FieldMemoryInput {
   /// Bricks handed to the segment callback at once (EngineOptions::max_chunk_bricks); 0 = whole segments, which
   /// the estimate bounds by the touched voxels.
   uint64_t chunk_bricks = 0;
+  bool closest_features = false;  ///< EngineOptions::closest_features: 4 KiB more per output brick
 };
 
 struct FieldMemoryEstimate {

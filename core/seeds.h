@@ -10,6 +10,10 @@
 //     different labels (used for signed seed volumes, where inside and outside have different site sets).
 //   * `site_offset`: sites are in the index space of a larger grid of which the engine's grid is the window at
 //     site_offset (a tile of a query split over servers); voxel c is at c + site_offset there. Zero otherwise.
+//   * Closest features (EngineOptions::closest_features): kSiteIndex reports site_feature[site], or the site index
+//     itself when site_feature is empty (triangle ids, point indices); kSiteVoxel reports the voxel a point site
+//     sits on as its linear index in the engine's grid (Grid::denseIndex; volumes, whose sites are boundary
+//     voxels), kNoSite voxels (the seed volume's inside) being their own feature.
 //   * `sign` (optional): called on every delivered brick to turn unsigned distances into signed ones
 //     (negative inside, OpenVDB's convention); it receives each masked voxel's site.
 #pragma once
@@ -46,6 +50,9 @@ struct Seeds {
   bool band_exact = false;
   std::shared_ptr<const std::vector<uint8_t>> region;  ///< null, or grid.voxelCount() labels
   Coord site_offset{};  ///< where the engine's grid sits in the sites' index space (see above)
+  enum class FeatureKind { kSiteIndex, kSiteVoxel };
+  FeatureKind feature_kind = FeatureKind::kSiteIndex;
+  std::vector<uint32_t> site_feature;  ///< kSiteIndex: the feature of each site (empty: the site index)
   /// Signs the masked values of `brick` in place; `sites[i]` is the site of voxel offset i (kNoSite if none).
   std::function<void(Brick& brick, const uint32_t* sites)> sign;
 

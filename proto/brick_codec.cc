@@ -57,7 +57,16 @@ float halfToFloat(uint16_t h) {
   return std::bit_cast<float>(f);
 }
 
-void encodeBrick(const Brick& brick, v1::BrickEncoding encoding, v1::BrickData* out) {
+size_t bytesPerClosest(v1::ClosestFeature closest) {
+  switch (closest) {
+    case v1::CLOSEST_FEATURE_TRIANGLE:
+    case v1::CLOSEST_FEATURE_POINT: return 4;
+    case v1::CLOSEST_FEATURE_VOXEL: return 8;
+    default: return 0;
+  }
+}
+
+void encodeBrick(const Brick& brick, v1::BrickEncoding encoding, v1::BrickData* out, v1::ClosestFeature closest) {
   out->set_x(brick.origin.x);
   out->set_y(brick.origin.y);
   out->set_z(brick.origin.z);
@@ -80,9 +89,26 @@ void encodeBrick(const Brick& brick, v1::BrickEncoding encoding, v1::BrickData* 
       dst += bpv;
     }
   }
+  const size_t bpc = bytesPerClosest(closest);
+  if (bpc == 0 || brick.closest.size() != size_t(kBrickVoxels)) return;
+  std::string* ids = out->mutable_closest();
+  ids->resize(size_t(brick.mask.count()) * bpc);
+  char* at = ids->data();
+  for (int w = 0; w < kBrickVoxels / 64; ++w)
+    for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1) {
+      const int64_t id = brick.closest[size_t(w * 64 + std::countr_zero(bits))];
+      if (bpc == 8) {
+        std::memcpy(at, &id, 8);
+      } else {
+        const int32_t id32 = int32_t(id);
+        std::memcpy(at, &id32, 4);
+      }
+      at += bpc;
+    }
 }
 
-std::string decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, Brick* out) {
+std::string decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, Brick* out,
+                        v1::ClosestFeature closest) {
   if (data.mask().size() != 64) return fmt::format("brick mask has {} bytes, expected 64", data.mask().size());
   if ((data.x() | data.y() | data.z()) & (kBrickSize - 1))
     return fmt::format("brick origin ({}, {}, {}) is not a multiple of 8", data.x(), data.y(), data.z());
@@ -110,7 +136,28 @@ std::string decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, B
       src += bpv;
     }
   }
-  *out = b;
+  if (const size_t bpc = bytesPerClosest(closest); bpc > 0) {
+    const size_t ids = size_t(b.mask.count()) * bpc;
+    if (data.closest().size() != ids)
+      return fmt::format("brick at ({}, {}, {}) has {} closest-feature bytes, its mask needs {}", data.x(), data.y(),
+                         data.z(), data.closest().size(), ids);
+    b.closest.assign(kBrickVoxels, -1);
+    const char* at = data.closest().data();
+    for (int w = 0; w < kBrickVoxels / 64; ++w)
+      for (uint64_t bits = b.mask.words[w]; bits; bits &= bits - 1) {
+        int64_t id;
+        if (bpc == 8) {
+          std::memcpy(&id, at, 8);
+        } else {
+          int32_t id32;
+          std::memcpy(&id32, at, 4);
+          id = id32;
+        }
+        b.closest[size_t(w * 64 + std::countr_zero(bits))] = id;
+        at += bpc;
+      }
+  }
+  *out = std::move(b);
   return {};
 }
 

@@ -362,7 +362,7 @@ grpc::Status DistanceFieldService::GetInfo(grpc::ServerContext* context, const v
   r->set_max_message_bytes(options_.max_message_bytes);
   for (const char* s : {"cubic6", "cubic18", "cubic26", "fcc12"}) r->add_stencils(s);
   for (const char* s : {"paper", "exact"}) r->add_modes(s);
-  for (const char* s : {"unsigned", "pseudonormal", "winding", "parity", "mask_inside"}) r->add_sign_modes(s);
+  for (const char* s : {"auto", "unsigned", "pseudonormal", "winding", "parity", "mask_inside"}) r->add_sign_modes(s);
   for (const char* s : {"obj", "off", "ply", "stl"}) r->add_mesh_formats(s);
   for (const char* s : {"float32", "float16"}) r->add_encodings(s);
   r->set_active_queries(uint32_t(slots_.active()));

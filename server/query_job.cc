@@ -109,10 +109,19 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
     // A tile: bricks move to the whole grid's coordinates; those of the halo (outside `deliver`, whole bricks since
     // both boxes are brick-aligned) are not sent. Order (z, y, x) is kept: the shift is the same for every brick.
     const Coord shift = query_.tile->window.min;
+    const Grid window = query_.engineGrid();
+    const bool voxel_ids = query_.closest == v1::CLOSEST_FEATURE_VOXEL;  // window indices -> the whole grid's
     size_t kept = 0;
     for (Brick& b : chunk.bricks) {
       b.origin = b.origin + shift;
       if (!query_.tile->deliver.contains(b.origin)) continue;
+      if (voxel_ids)
+        for (int64_t& id : b.closest)
+          if (id >= 0) {
+            const Coord d = window.dims();
+            const Coord c{int(id % d.x), int(id / d.x % d.y), int(id / (int64_t(d.x) * d.y))};
+            id = query_.grid.denseIndex(c + shift);
+          }
       if (&chunk.bricks[kept] != &b) chunk.bricks[kept] = std::move(b);
       ++kept;
     }
@@ -130,7 +139,7 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
     do {
       const Brick& b = chunk.bricks[i];
       const int count = b.mask.count();
-      const size_t need = encodedBrickBytes(count, enc);
+      const size_t need = encodedBrickBytes(count, enc, query_.closest);
       if (batch.end > batch.begin && batch.bytes + need > query_.batch_bytes) break;
       batch.bytes += need;
       segment_voxels_ += uint64_t(count);
@@ -155,7 +164,7 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
       batch->set_lower(chunk.lower_world);
       batch->set_upper(chunk.upper_world);
       batch->mutable_bricks()->Reserve(int(batches[k].end - batches[k].begin));
-      for (size_t i = batches[k].begin; i < batches[k].end; ++i) encodeBrick(chunk.bricks[i], enc, batch->add_bricks());
+      for (size_t i = batches[k].begin; i < batches[k].end; ++i) encodeBrick(chunk.bricks[i], enc, batch->add_bricks(), query_.closest);
       messages[k - w0] = std::move(msg);
     });
     for (size_t k = w0; k < w1; ++k)

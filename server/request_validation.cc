@@ -17,7 +17,6 @@ Status invalid(std::string message) { return Status::InvalidArgument(std::move(m
 bool finite(const v1::Vec3& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
 Vec3d toVec(const v1::Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
-constexpr uint32_t kMaxPadding = 4096;
 constexpr int kMaxPoints = 1 << 20;
 constexpr double kMaxSegments = 100000;
 
@@ -75,13 +74,15 @@ Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, Ass
 }
 
 // A volume covers the whole grid, or a tile's window only (then its dims are the window's and the grid needs dims).
-Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, Grid* grid) {
+// `limit_voxels` > 0: the request's limit in voxels, else q.engine.limit_world holds it (for the default padding).
+Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, double limit_voxels, Grid* grid,
+                   GridPadding* padding) {
   if (g.voxel_size() != 0 && !(std::isfinite(g.voxel_size()) && g.voxel_size() > 0))
     return invalid(fmt::format("grid.voxel_size must be finite and > 0 when set (got {})", g.voxel_size()));
   if (g.resolution() != 0 && (g.resolution() < 2 || g.resolution() > uint32_t(kMaxGridDim)))
     return invalid(fmt::format("grid.resolution must be in [2, {}] when set (got {})", kMaxGridDim, g.resolution()));
-  if (g.has_padding() && g.padding() > kMaxPadding)
-    return invalid(fmt::format("grid.padding must be in [0, {}] voxels (got {})", kMaxPadding, g.padding()));
+  if (g.has_padding() && g.padding() > uint32_t(kMaxPaddingVoxels))
+    return invalid(fmt::format("grid.padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, g.padding()));
   if (g.has_origin() && !finite(g.origin()))
     return invalid("grid.origin must have finite coordinates");
   const bool volume = q.seed_kind == ResolvedQuery::SeedKind::kVolume;
@@ -117,6 +118,9 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, Gri
   MeshGridOptions mo;
   mo.voxel_size = g.voxel_size();
   mo.resolution = int(g.resolution());
+  if (g.has_padding()) mo.padding_voxels = int(g.padding());
+  mo.limit_world = q.engine.limit_world;
+  mo.limit_voxels = limit_voxels;
   TriangleMesh point_bounds;  // gridForMesh reads only the vertices' bounds
   const TriangleMesh* bounds = &point_bounds;
   if (g.has_box()) {  // way b
@@ -125,16 +129,14 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, Gri
     mo.box_max = toVec(g.box().max());
     const Vec3d lo = *mo.box_min, hi = *mo.box_max;
     if (!(hi.x >= lo.x && hi.y >= lo.y && hi.z >= lo.z)) return invalid("grid.box.max must be >= grid.box.min");
-    mo.padding_voxels = g.has_padding() ? int(g.padding()) : 0;
   } else {  // way c
-    mo.padding_voxels = g.has_padding() ? int(g.padding()) : 3;
     if (q.seed_kind == ResolvedQuery::SeedKind::kMesh) {
       bounds = q.asset->mesh.get();
     } else {
       point_bounds.vertices = q.points;
     }
   }
-  if (std::string e = gridForMesh(*bounds, mo, grid); !e.empty()) return invalid("grid: " + e);
+  if (std::string e = gridForMesh(*bounds, mo, grid, padding); !e.empty()) return invalid("grid: " + e);
   return Status::Ok();
 }
 
@@ -216,6 +218,7 @@ void estimateMemory(ResolvedQuery* q) {
   in.mode = q->engine.mode;
   in.grid_voxels = uint64_t(grid.voxelCount());
   in.chunk_bricks = kQueryChunkBricks;
+  in.closest_features = q->engine.closest_features;
   switch (q->seed_kind) {
     case ResolvedQuery::SeedKind::kPoints:
       in.seed_kind = FieldMemoryInput::SeedKind::kPoints;
@@ -235,12 +238,7 @@ void estimateMemory(ResolvedQuery* q) {
       in.mesh_vertices = mesh.vertices.size();
       in.mesh_triangles = mesh.triangles.size();
       in.mesh_area_voxels = meshAreaVoxels(mesh, grid.voxelSize());
-      switch (q->sign) {
-        case v1::SIGN_MODE_WINDING: in.mesh_sign = SignMethod::kWinding; break;
-        case v1::SIGN_MODE_PARITY: in.mesh_sign = SignMethod::kParity; break;
-        case v1::SIGN_MODE_UNSIGNED: in.mesh_sign = SignMethod::kUnsigned; break;
-        default: in.mesh_sign = SignMethod::kPseudonormal; break;
-      }
+      in.mesh_sign = q->mesh_sign;
       if (!extent.wholeGrid())
         for (const auto& t : mesh.triangles) {
           const Vec3d a = grid.indexOf(mesh.vertices[t[0]]), b = grid.indexOf(mesh.vertices[t[1]]),
@@ -253,6 +251,20 @@ void estimateMemory(ResolvedQuery* q) {
   }
   q->touched_voxels_bound = extent.voxelBound();
   in.touched_voxels = q->touched_voxels_bound;
+  // What the query will likely deliver, for the client's progress: the band's volume (a shell around a mesh or a
+  // volume's boundary, balls around points), at most the touched bound. Not an admission figure.
+  double expected = double(q->touched_voxels_bound);
+  if (std::isfinite(limit_voxels)) {
+    const double l = limit_voxels;
+    switch (q->seed_kind) {
+      case ResolvedQuery::SeedKind::kPoints: expected = double(q->points.size()) * 4.18879 * l * l * l; break;
+      case ResolvedQuery::SeedKind::kVolume:
+        expected = double(in.volume_seed_voxels) + double(in.volume_boundary_voxels) * l * (in.signed_volume ? 2 : 1);
+        break;
+      case ResolvedQuery::SeedKind::kMesh: expected = in.mesh_area_voxels * 2 * l; break;
+    }
+  }
+  q->expected_voxels = uint64_t(std::min(expected, double(q->touched_voxels_bound)));
   q->memory = estimateFieldMemory(in);
 }
 
@@ -295,27 +307,45 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
     default: return invalid(fmt::format("encoding must be a BrickEncoding value 0..2 (got {})", int(r.encoding())));
   }
   const v1::SignMode sign = r.sign();
-  if (sign < v1::SIGN_MODE_UNSPECIFIED || sign > v1::SIGN_MODE_MASK_INSIDE)
-    return invalid(fmt::format("sign must be a SignMode value 0..5 (got {})", int(sign)));
+  if (sign < v1::SIGN_MODE_UNSPECIFIED || sign > v1::SIGN_MODE_AUTO)
+    return invalid(fmt::format("sign must be a SignMode value 0..6 (got {})", int(sign)));
+  // UNSPECIFIED and AUTO are the seeds' default: core's for meshes (resolved on the mesh), unsigned otherwise.
+  const bool default_sign = sign == v1::SIGN_MODE_UNSPECIFIED || sign == v1::SIGN_MODE_AUTO;
+  q.sign_reason = default_sign ? "default" : "requested";
   switch (q.seed_kind) {
     case ResolvedQuery::SeedKind::kPoints:
-      if (sign != v1::SIGN_MODE_UNSPECIFIED && sign != v1::SIGN_MODE_UNSIGNED)
+      if (!default_sign && sign != v1::SIGN_MODE_UNSIGNED)
         return invalid(fmt::format("sign: point seeds only support SIGN_MODE_UNSIGNED (got {})",
                                    v1::SignMode_Name(sign)));
       q.sign = v1::SIGN_MODE_UNSIGNED;
       break;
     case ResolvedQuery::SeedKind::kVolume:
-      if (sign != v1::SIGN_MODE_UNSPECIFIED && sign != v1::SIGN_MODE_UNSIGNED && sign != v1::SIGN_MODE_MASK_INSIDE)
+      if (!default_sign && sign != v1::SIGN_MODE_UNSIGNED && sign != v1::SIGN_MODE_MASK_INSIDE)
         return invalid(fmt::format("sign: volume seeds support SIGN_MODE_UNSIGNED or SIGN_MODE_MASK_INSIDE (got {})",
                                    v1::SignMode_Name(sign)));
-      q.sign = sign == v1::SIGN_MODE_UNSPECIFIED ? v1::SIGN_MODE_UNSIGNED : sign;
+      q.sign = default_sign ? v1::SIGN_MODE_UNSIGNED : sign;
       break;
-    case ResolvedQuery::SeedKind::kMesh:
-      if (sign == v1::SIGN_MODE_MASK_INSIDE)
-        return invalid("sign: SIGN_MODE_MASK_INSIDE is for volume seeds; meshes take UNSIGNED, PSEUDONORMAL, "
-                       "WINDING or PARITY");
-      q.sign = sign == v1::SIGN_MODE_UNSPECIFIED ? v1::SIGN_MODE_PSEUDONORMAL : sign;
+    case ResolvedQuery::SeedKind::kMesh: {
+      SignMethod method = kDefaultMeshSign;
+      switch (sign) {
+        case v1::SIGN_MODE_UNSIGNED: method = SignMethod::kUnsigned; break;
+        case v1::SIGN_MODE_PSEUDONORMAL: method = SignMethod::kPseudonormal; break;
+        case v1::SIGN_MODE_WINDING: method = SignMethod::kWinding; break;
+        case v1::SIGN_MODE_PARITY: method = SignMethod::kParity; break;
+        case v1::SIGN_MODE_MASK_INSIDE:
+          return invalid("sign: SIGN_MODE_MASK_INSIDE is for volume seeds; meshes take AUTO, UNSIGNED, PSEUDONORMAL, "
+                         "WINDING or PARITY");
+        default: break;
+      }
+      q.mesh_sign = resolveSignMethod(method, q.asset->mesh_report, &q.sign_reason);
+      switch (q.mesh_sign) {
+        case SignMethod::kUnsigned: q.sign = v1::SIGN_MODE_UNSIGNED; break;
+        case SignMethod::kWinding: q.sign = v1::SIGN_MODE_WINDING; break;
+        case SignMethod::kParity: q.sign = v1::SIGN_MODE_PARITY; break;
+        default: q.sign = v1::SIGN_MODE_PSEUDONORMAL; break;
+      }
       break;
+    }
   }
 
   if (!(r.segment_length() >= 0) || !std::isfinite(r.segment_length()))
@@ -326,6 +356,14 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
     return invalid(fmt::format("limit_voxels must be finite and > 0 when set (got {})", r.limit_voxels()));
   if (r.limit_voxels() != 0 && r.limit() != 0)
     return invalid("limit and limit_voxels are mutually exclusive: give the limit in world units or in voxels");
+  if (r.closest_feature()) {
+    q.engine.closest_features = true;
+    switch (q.seed_kind) {
+      case ResolvedQuery::SeedKind::kPoints: q.closest = v1::CLOSEST_FEATURE_POINT; break;
+      case ResolvedQuery::SeedKind::kVolume: q.closest = v1::CLOSEST_FEATURE_VOXEL; break;
+      case ResolvedQuery::SeedKind::kMesh: q.closest = v1::CLOSEST_FEATURE_TRIANGLE; break;
+    }
+  }
   q.engine.segment_length_world = r.segment_length();
   q.engine.limit_world = r.limit() == 0 ? std::numeric_limits<double>::infinity() : r.limit();
 
@@ -334,7 +372,7 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
                       : std::clamp<uint32_t>(r.max_batch_bytes(), 64u << 10, options.max_message_bytes);
 
   if (!r.has_grid()) return invalid("grid must be set (voxel_size or resolution, or dims)");
-  if (Status s = resolveGrid(r.grid(), q, r.has_tile(), &q.grid); !s.ok()) return s;
+  if (Status s = resolveGrid(r.grid(), q, r.has_tile(), r.limit_voxels(), &q.grid, &q.padding); !s.ok()) return s;
   if (r.limit_voxels() != 0) q.engine.limit_world = r.limit_voxels() * q.grid.voxelSize();
   if (r.has_tile())
     if (Status s = resolveTile(r.tile(), q.grid, &q); !s.ok()) return s;
@@ -392,6 +430,11 @@ void fillQueryHeader(const ResolvedQuery& q, const std::string& query_id, v1::Qu
   h->set_sign(q.sign);
   h->set_segment_length(q.engine.segment_length_world);
   h->set_query_id(query_id);
+  h->set_sign_reason(q.sign_reason);
+  h->set_padding(uint32_t(q.padding.voxels));
+  h->set_closest_feature(q.closest);
+  h->set_expected_voxels(q.expected_voxels);
+  h->set_band_clipped(q.padding.band_clipped);
 }
 
 }  // namespace distband

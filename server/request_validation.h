@@ -17,6 +17,8 @@
 #include "core/field_memory.h"
 #include "core/status.h"
 #include "core/grid.h"
+#include "core/mesh/mesh_grid.h"
+#include "core/seeds/mesh_seeds.h"
 #include "core/tiling.h"
 #include "distband/v1/distband.pb.h"
 #include "server/asset_cache.h"
@@ -32,16 +34,21 @@ struct ResolvedQuery {
   std::string seeds_label;              ///< for logs, e.g. "points(2)" or "mesh-1a2b…(bunny.obj)"
 
   Grid grid;                            ///< the whole grid (what the header describes)
+  GridPadding padding;                  ///< how the grid was padded around the seeds' bounds (ways b and c)
   /// Set for a tile (QueryRequest.tile): the engine computes grid.window(tile->window) and only the voxels of
   /// tile->deliver are streamed.
   std::optional<TilePlan> tile;
   EngineOptions engine;                 ///< threads and interrupted are set by the job
-  v1::SignMode sign = v1::SIGN_MODE_UNSIGNED;            ///< never UNSPECIFIED
+  v1::SignMode sign = v1::SIGN_MODE_UNSIGNED;            ///< never UNSPECIFIED or AUTO
+  SignMethod mesh_sign = SignMethod::kUnsigned;          ///< kMesh: `sign` for core (never kAuto)
+  std::string sign_reason;                               ///< why `sign` is in force (QueryHeader.sign_reason)
   v1::Stencil stencil = v1::STENCIL_CUBIC26;             ///< never UNSPECIFIED
   v1::PropagationMode mode = v1::PROPAGATION_MODE_EXACT; ///< never UNSPECIFIED
   v1::BrickEncoding encoding = v1::BRICK_ENCODING_FLOAT32;  ///< never UNSPECIFIED
+  v1::ClosestFeature closest = v1::CLOSEST_FEATURE_NONE;    ///< what BrickData.closest carries (engine.closest_features)
   uint32_t batch_bytes = 1u << 20;
   uint64_t touched_voxels_bound = 0;    ///< BandExtent::voxelBound() of the seeds and limit
+  uint64_t expected_voxels = 0;         ///< an estimate of the voxels delivered (QueryHeader.expected_voxels)
   FieldMemoryEstimate memory;           ///< peak bytes of seeds + engine + one output chunk
 
   bool signedField() const { return sign != v1::SIGN_MODE_UNSIGNED; }

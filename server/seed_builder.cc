@@ -15,12 +15,7 @@ std::string buildSeeds(const ResolvedQuery& q, Seeds* seeds, const Interrupter* 
     case ResolvedQuery::SeedKind::kMesh: {
       MeshSeedOptions o;
       o.mode = q.mode == v1::PROPAGATION_MODE_PAPER ? MeshSiteMode::kPaper : MeshSiteMode::kExactFeature;
-      switch (q.sign) {
-        case v1::SIGN_MODE_UNSIGNED: o.sign = SignMethod::kUnsigned; break;
-        case v1::SIGN_MODE_WINDING: o.sign = SignMethod::kWinding; break;
-        case v1::SIGN_MODE_PARITY: o.sign = SignMethod::kParity; break;
-        default: o.sign = SignMethod::kPseudonormal; break;
-      }
+      o.sign = q.mesh_sign;
       o.limit_voxels = q.engine.limit_world / q.grid.voxelSize();
       o.interrupter = interrupter;
       return makeMeshSeeds(q.engineGrid(), *q.asset->mesh, o, seeds);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -257,19 +258,17 @@ v1::QueryRequest TiledQuery::tileRequest(const Tile& tile) const {
   r.set_segment_length(q.engine.segment_length_world);
   r.set_limit(q.engine.limit_world);
   r.set_max_batch_bytes(q.batch_bytes);
+  r.set_closest_feature(q.closest != v1::CLOSEST_FEATURE_NONE);
   setBox(tile.plan.window, r.mutable_tile()->mutable_window());
   setBox(tile.plan.deliver, r.mutable_tile()->mutable_deliver());
   switch (q.seed_kind) {
     case ResolvedQuery::SeedKind::kPoints: {
-      // Only points that can reach the tile within the limit, in their original order (ties go to the lower index).
-      const double reach = q.engine.limit_world / q.grid.voxelSize() + 1;
       r.mutable_points();  // set even when no point is within reach (then the tile is not sent)
-      for (const Vec3d& p : q.points) {
-        if (std::isfinite(reach) && dist2ToBox(q.grid.indexOf(p), tile.plan.deliver) > reach * reach) continue;
+      for (const uint32_t i : tile.point_index) {
         v1::Vec3* v = r.mutable_points()->add_points();
-        v->set_x(p.x);
-        v->set_y(p.y);
-        v->set_z(p.z);
+        v->set_x(q.points[i].x);
+        v->set_y(q.points[i].y);
+        v->set_z(q.points[i].z);
       }
       break;
     }
@@ -438,6 +437,22 @@ void TiledQuery::onMessage(size_t index, v1::QueryReply& m) {
   }
 }
 
+namespace {
+
+// A replica's point ids index the tile's points; the client's index the request's. An id outside the tile's list
+// (a faulty replica) becomes -1, which no client takes for a point.
+void remapPointIds(const std::vector<uint32_t>& point_index, v1::BrickData* b) {
+  std::string& ids = *b->mutable_closest();
+  for (size_t at = 0; at + 4 <= ids.size(); at += 4) {
+    int32_t id;
+    std::memcpy(&id, ids.data() + at, 4);
+    id = id >= 0 && size_t(id) < point_index.size() ? int32_t(point_index[size_t(id)]) : -1;
+    std::memcpy(ids.data() + at, &id, 4);
+  }
+}
+
+}  // namespace
+
 void TiledQuery::forward(Tile& t, Message msg) {
   auto* bricks = msg->mutable_bricks()->mutable_bricks();
   if (t.attempts > 0) {  // a retry: skip what the failed attempt already sent
@@ -446,9 +461,11 @@ void TiledQuery::forward(Tile& t, Message msg) {
     bricks->erase(keep, bricks->end());
     if (bricks->empty()) return;
   }
-  for (const v1::BrickData& b : *bricks) {
+  const bool point_ids = query_.closest == v1::CLOSEST_FEATURE_POINT;
+  for (v1::BrickData& b : *bricks) {
     t.forwarded.insert(brickKey(b));
-    value_bytes_ += b.values().size() + b.mask().size();
+    value_bytes_ += b.values().size() + b.mask().size() + b.closest().size();
+    if (point_ids) remapPointIds(t.point_index, &b);
   }
   const uint64_t bytes = msg->ByteSizeLong();
   queue_.push(std::move(msg), bytes);  // blocks while the client reads slowly (every tile then waits: bounded)
@@ -593,7 +610,16 @@ void TiledQuery::run() {
   replicas_ = config_.pool.replicas().size();
   {
     std::lock_guard lock(mu_);
-    for (const TilePlan& p : plan(query_, config_.options.tile_voxels)) tiles_.emplace_back().plan = p;
+    for (const TilePlan& p : plan(query_, config_.options.tile_voxels)) {
+      Tile& t = tiles_.emplace_back();
+      t.plan = p;
+      if (query_.seed_kind != ResolvedQuery::SeedKind::kPoints) continue;
+      // Only points that can reach the tile within the limit, in their original order (ties go to the lower index).
+      const double reach = query_.engine.limit_world / query_.grid.voxelSize() + 1;
+      for (size_t i = 0; i < query_.points.size(); ++i)
+        if (!std::isfinite(reach) || dist2ToBox(query_.grid.indexOf(query_.points[i]), p.deliver) <= reach * reach)
+          t.point_index.push_back(uint32_t(i));
+    }
     for (size_t i = 0; i < tiles_.size(); ++i) pending_.push_back(i);
   }
   mesh_reach_ = meshReach();

@@ -77,6 +77,9 @@ class TiledQuery final : public QueryStream {
  private:
   struct Tile {
     TilePlan plan;
+    /// Point seeds: the indices (in the request) of the points sent with this tile, in order; a replica's
+    /// closest-feature ids index this list.
+    std::vector<uint32_t> point_index;
     int attempts = 0;
     uint32_t completed = 0;   ///< segments finished (their SegmentDone seen)
     bool finished = false;    ///< its last segment finished

@@ -35,7 +35,14 @@ std::string fieldMetadataJson(const FieldMetadata& m) {
       {"segment_length", m.segment_length_world},
       {"voxels_delivered", m.voxels_delivered},
       {"seconds", m.seconds},
+      {"complete", m.complete},
+      {"segments", m.segments},
+      {"complete_up_to", finiteOrNull(m.complete_up_to_world)},
+      {"band_clipped", m.band_clipped},
   };
+  if (!m.sign.empty()) j["sign"] = {{"method", m.sign}, {"reason", m.sign_reason}};
+  if (m.padding_voxels >= 0) j["padding_voxels"] = m.padding_voxels;
+  if (!m.closest_file.empty()) j["closest"] = {{"data_file", m.closest_file}, {"feature", m.closest_feature}};
   return j.dump(2) + "\n";
 }
 

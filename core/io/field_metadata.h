@@ -22,6 +22,17 @@ struct FieldMetadata {
   double segment_length_world = 0;
   int64_t voxels_delivered = 0;
   double seconds = 0;
+  std::string sign;         ///< the sign method in force ("" when unsigned or not a mesh)
+  std::string sign_reason;  ///< why (e.g. "auto: the mesh is closed")
+  int padding_voxels = -1;  ///< the padding around the seeds' bounds (-1: not applicable, explicit dims)
+  bool band_clipped = false;  ///< the padding was smaller than the limit in voxels
+  /// False when the run was interrupted: the file holds the `segments` complete segments received, i.e. every voxel
+  /// with |distance| <= complete_up_to_world; farther voxels hold the background.
+  bool complete = true;
+  int segments = 0;
+  double complete_up_to_world = 0;
+  std::string closest_file;     ///< the closest-feature array, if written (name only)
+  std::string closest_feature;  ///< what its ids are: "triangle", "point" or "voxel"
 };
 
 /// The metadata as pretty-printed JSON text.

@@ -346,4 +346,20 @@ std::string writeNpyMask(const std::string& path, const std::vector<uint8_t>& ma
   return writeNpyFile(path, "|u1", dims, mask.data(), mask.size());
 }
 
+namespace {
+template <typename T>
+std::string writeNpyInts(const std::string& path, const char* descr, const std::vector<T>& values, const Coord& dims) {
+  if (int64_t(values.size()) != int64_t(dims.x) * dims.y * dims.z)
+    return fmt::format("{}: {} values do not fill dims {}x{}x{}", path, values.size(), dims.x, dims.y, dims.z);
+  return writeNpyFile(path, descr, dims, values.data(), values.size() * sizeof(T));
+}
+}  // namespace
+
+std::string writeNpyInt32(const std::string& path, const std::vector<int32_t>& values, const Coord& dims) {
+  return writeNpyInts(path, "<i4", values, dims);
+}
+std::string writeNpyInt64(const std::string& path, const std::vector<int64_t>& values, const Coord& dims) {
+  return writeNpyInts(path, "<i8", values, dims);
+}
+
 }  // namespace distband

@@ -51,4 +51,8 @@ std::string writeNpyFloat32(const std::string& path, const std::vector<float>& v
 /// Writes a uint8 mask (x-fastest) as a (Z, Y, X) '|u1' array.
 std::string writeNpyMask(const std::string& path, const std::vector<uint8_t>& mask, const Coord& dims);
 
+/// Integer arrays of shape (Z, Y, X) (closest-feature ids), '<i4' or '<i8'; atomic like the others.
+std::string writeNpyInt32(const std::string& path, const std::vector<int32_t>& values, const Coord& dims);
+std::string writeNpyInt64(const std::string& path, const std::vector<int64_t>& values, const Coord& dims);
+
 }  // namespace distband

@@ -7,12 +7,37 @@
 
 namespace distband {
 
-std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid* grid) {
+namespace {
+
+// The padding that holds a band of the limit around bounds of longest extent `longest`: the smallest p >= the
+// default with p * h >= limit, where h depends on p when the grid is sized by its resolution N
+// (h = longest / (N - 1 - 2p)); then p >= L (N - 1) / (longest + 2L) in world units.
+// Beyond the cap the band is clipped (gridForMesh reports it).
+int paddingForLimit(const MeshGridOptions& o, double longest) {
+  const bool in_voxels = o.limit_voxels > 0;
+  if (!(in_voxels ? std::isfinite(o.limit_voxels) : std::isfinite(o.limit_world))) return kDefaultPaddingVoxels;
+  double need = 0;  // voxels
+  int cap = kMaxPaddingVoxels;
+  if (o.resolution > 0) {
+    cap = std::min(cap, std::max(0, (o.resolution - 1) / 4));  // the bounds keep at least half of the N voxels
+    need = in_voxels ? o.limit_voxels
+                     : (longest > 0 ? o.limit_world * (o.resolution - 1) / (longest + 2 * o.limit_world) : 0);
+  } else {
+    need = in_voxels ? o.limit_voxels : o.limit_world / o.voxel_size;
+  }
+  // The slack keeps an exact integer (limit 5 voxels -> 5) from rounding up.
+  const double p = std::max<double>(kDefaultPaddingVoxels, std::ceil(need - 1e-9));
+  return p > cap ? std::max(cap, kDefaultPaddingVoxels) : int(p);
+}
+
+}  // namespace
+
+std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid* grid, GridPadding* padding_out) {
   if ((o.voxel_size > 0) == (o.resolution > 0))
     return "give exactly one of voxel size (> 0) and resolution (> 0)";
   if (o.voxel_size > 0 && !std::isfinite(o.voxel_size)) return "voxel size must be finite";
-  if (o.padding_voxels < 0 || o.padding_voxels > kMaxGridDim / 4)
-    return fmt::format("padding must be in [0, {}] voxels (got {})", kMaxGridDim / 4, o.padding_voxels);
+  if (o.padding_voxels && (*o.padding_voxels < 0 || *o.padding_voxels > kMaxPaddingVoxels))
+    return fmt::format("padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, *o.padding_voxels);
   if (o.box_min.has_value() != o.box_max.has_value()) return "an explicit box needs both its min and max corner";
   Vec3d lo, hi;
   if (o.box_min) {
@@ -30,18 +55,29 @@ std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid
   }
   const Vec3d ext = hi - lo;
   const double longest = std::max({ext.x, ext.y, ext.z});
+  if (o.resolution > kMaxGridDim) return fmt::format("resolution must be <= {} (got {})", kMaxGridDim, o.resolution);
+  GridPadding padding;
+  if (o.padding_voxels) {
+    padding.voxels = *o.padding_voxels;
+  } else if (o.box_min) {
+    padding.voxels = 0;
+  } else {
+    padding.voxels = paddingForLimit(o, longest);
+  }
   double h = o.voxel_size;
   if (o.resolution > 0) {
-    const int span = o.resolution - 1 - 2 * o.padding_voxels;
-    if (o.resolution > kMaxGridDim)
-      return fmt::format("resolution must be <= {} (got {})", kMaxGridDim, o.resolution);
+    const int span = o.resolution - 1 - 2 * padding.voxels;
     if (span < 1)
       return fmt::format("resolution {} leaves no voxel inside a padding of {} on both sides", o.resolution,
-                         o.padding_voxels);
+                         padding.voxels);
     if (!(longest > 0)) return "the box has zero extent, so a resolution cannot size it (give a voxel size)";
     h = longest / span;
   }
-  const double pad = o.padding_voxels;
+  if (!o.box_min) {
+    const double limit_voxels = o.limit_voxels > 0 ? o.limit_voxels : o.limit_world / h;
+    padding.band_clipped = padding.voxels < limit_voxels - 1e-9;
+  }
+  const double pad = padding.voxels;
   auto count = [&](double e) {
     // Voxels covering [lo, lo + e] plus padding; the small slack keeps N exact when e / h is an integer.
     const double cells = std::ceil(e / h - 1e-9);
@@ -54,6 +90,7 @@ std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid
   Grid g(lo - Vec3d{pad * h, pad * h, pad * h}, h, {int(nx), int(ny), int(nz)});
   if (std::string e = g.validate(); !e.empty()) return e;
   *grid = g;
+  if (padding_out) *padding_out = padding;
   return {};
 }
 

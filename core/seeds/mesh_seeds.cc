@@ -29,6 +29,7 @@ bool parseMeshSiteMode(std::string_view name, MeshSiteMode* mode) {
 }
 std::string_view signMethodName(SignMethod method) {
   switch (method) {
+    case SignMethod::kAuto: return "auto";
     case SignMethod::kPseudonormal: return "pseudonormal";
     case SignMethod::kWinding: return "winding";
     case SignMethod::kParity: return "parity";
@@ -37,9 +38,29 @@ std::string_view signMethodName(SignMethod method) {
   return "?";
 }
 bool parseSignMethod(std::string_view name, SignMethod* method) {
-  for (SignMethod m : {SignMethod::kPseudonormal, SignMethod::kWinding, SignMethod::kParity, SignMethod::kUnsigned})
+  for (SignMethod m : {SignMethod::kAuto, SignMethod::kPseudonormal, SignMethod::kWinding, SignMethod::kParity,
+                       SignMethod::kUnsigned})
     if (name == signMethodName(m)) return *method = m, true;
   return false;
+}
+
+SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std::string* reason) {
+  if (requested != SignMethod::kAuto) {
+    if (reason) *reason = "requested";
+    return requested;
+  }
+  if (report.closed()) {
+    if (reason) *reason = "auto: the mesh is closed";
+    return SignMethod::kPseudonormal;
+  }
+  if (reason) {
+    std::string edges;
+    if (report.boundary_edges > 0) edges = fmt::format("{} boundary edges", report.boundary_edges);
+    if (report.non_manifold_edges > 0)
+      edges += fmt::format("{}{} non-manifold edges", edges.empty() ? "" : ", ", report.non_manifold_edges);
+    *reason = fmt::format("auto: the mesh is not closed ({})", edges);
+  }
+  return SignMethod::kWinding;
 }
 
 namespace {
@@ -317,6 +338,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
   if (!(options.band_radius_voxels > 0 && options.band_radius_voxels <= 8))
     return fmt::format("band radius must be in (0, 8] voxels (got {})", options.band_radius_voxels);
   if (!(options.limit_voxels > 0)) return fmt::format("limit must be > 0 (got {})", options.limit_voxels);
+  if (options.sign == SignMethod::kAuto) return "the sign method auto must be resolved first (resolveSignMethod)";
   for (const auto& t : mesh.triangles)
     for (uint32_t i : t)
       if (i >= mesh.vertices.size()) return "a triangle refers to a vertex that does not exist";
@@ -465,6 +487,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
     seeds.kind = SiteKind::kPoint;
     seeds.points.resize(seeds.band.size());
     if (options.sign == SignMethod::kPseudonormal) signer->site_triangle.resize(seeds.band.size());
+    seeds.site_feature.resize(seeds.band.size());  // closest features: the triangle of each point site
     tbb::parallel_for(size_t(0), seeds.band.size(), [&](size_t i) {
       if (tbb::is_current_task_group_canceling()) return;
       BandVoxel& bv = seeds.band[i];
@@ -472,12 +495,14 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
       const Vec3d p{double(bv.voxel.x), double(bv.voxel.y), double(bv.voxel.z)};
       seeds.points[i] = closestPointOnTriangle(p, tri[0], tri[1], tri[2]);
       if (!signer->site_triangle.empty()) signer->site_triangle[i] = bv.site;
+      seeds.site_feature[i] = bv.site;
       bv.site = static_cast<uint32_t>(i);
     });
   } else {
     seeds.kind = SiteKind::kTriangle;
   }
   switch (options.sign) {
+    case SignMethod::kAuto:  // rejected above
     case SignMethod::kUnsigned: break;
     case SignMethod::kPseudonormal:
       signer->verts = std::move(verts);

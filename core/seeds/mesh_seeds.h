@@ -32,16 +32,26 @@
 namespace distband {
 
 enum class MeshSiteMode { kExactFeature, kPaper };
-enum class SignMethod { kPseudonormal, kWinding, kParity, kUnsigned };
+/// kAuto (the default for meshes, decided here once): kPseudonormal for a closed mesh, kWinding for an open one;
+/// resolve it with resolveSignMethod before makeMeshSeeds.
+enum class SignMethod { kAuto, kPseudonormal, kWinding, kParity, kUnsigned };
+inline constexpr SignMethod kDefaultMeshSign = SignMethod::kAuto;
 
 std::string_view meshSiteModeName(MeshSiteMode mode);
 bool parseMeshSiteMode(std::string_view name, MeshSiteMode* mode);  ///< "exact-feature", "paper"
 std::string_view signMethodName(SignMethod method);
-bool parseSignMethod(std::string_view name, SignMethod* method);  ///< "pseudonormal", "winding", "parity", "unsigned"
+/// "auto", "pseudonormal", "winding", "parity", "unsigned"
+bool parseSignMethod(std::string_view name, SignMethod* method);
+
+/// The method `requested` stands for on a mesh with this report: kAuto becomes kPseudonormal when the mesh is
+/// closed (the pseudonormal test is exact there and the cheapest), else kWinding (the pseudonormal test gives
+/// wrong-sign patches near an open mesh's holes); other methods are returned as they are. `reason` (may be null)
+/// gets why, for users: e.g. "auto: the mesh is open (312 boundary edges)", or "requested".
+SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std::string* reason);
 
 struct MeshSeedOptions {
   MeshSiteMode mode = MeshSiteMode::kExactFeature;
-  SignMethod sign = SignMethod::kPseudonormal;
+  SignMethod sign = SignMethod::kPseudonormal;  ///< never kAuto (resolveSignMethod)
   double band_radius_voxels = 1.5;  ///< initial band: voxels within this distance of a triangle, in (0, 8]
   double limit_voxels = std::numeric_limits<double>::infinity();  ///< band voxels beyond are dropped
   /// Polled throughout (the scan, sorts, sign tables, the winding-number tree, Embree's BVH build); when it trips,

@@ -105,6 +105,7 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
   seeds.kind = SiteKind::kPoint;
   size_t band_total = 0;
   for (const Slice& s : slices) band_total += s.band.size();
+  seeds.feature_kind = Seeds::FeatureKind::kSiteVoxel;  // sites are boundary voxels
   seeds.points.reserve(first_site.back());
   seeds.band.reserve(band_total);
   for (size_t z = 0; z < slices.size(); ++z) {

@@ -178,7 +178,7 @@ TEST(ComputeCommandTest, UsageAndInputErrorsExitTwo) {
        {"compute", "--mesh", std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/bunny.obj", "--resolution", "0", "--out", out},
        "--resolution must be at least 2 voxels (got 0)"},
       {"unsupported_out", {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", tmp("f.txt")},
-       "unsupported output format"},
+       "--out " + tmp("f.txt") + ": expected a .vdb, .npy file"},
       {"unwritable_out", {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", "/nonexistent/d/f.npy"},
        "does not exist"},
   };

@@ -71,7 +71,7 @@ TEST(ProgressTest, PlainModePrintsOneLinePerSegmentWithTheNumbers) {
   EXPECT_EQ(p.estimatedSegments(), 4);
 
   t = 100.5;
-  p.onData(4, 8000);  // mid-segment data: counted, not printed in plain mode
+  p.onData(4, 2048, 8000);  // mid-segment data: counted, not printed in plain mode
   EXPECT_EQ(p.totalBricks(), 4);
   EXPECT_EQ(p.totalBytes(), 8000u);
   EXPECT_EQ(out.text(), "");
@@ -157,16 +157,16 @@ TEST(ProgressTest, TerminalModeRedrawsOneLineAndThrottlesData) {
   ProgressDisplay p(o);
   EXPECT_TRUE(p.terminal());
   t = 0.01;
-  p.onData(5, 1000000);  // first data: drawn
+  p.onData(5, 2560, 1000000);  // first data: drawn
   t = 0.05;
-  p.onData(5, 1000000);  // within the redraw interval: not drawn
+  p.onData(5, 2560, 1000000);  // within the redraw interval: not drawn
   t = 2;
   p.onSegment(seg(0, 0, 1, 12, 100, 2500000));
   const std::string s = out.text();
   EXPECT_EQ(std::count(s.begin(), s.end(), '\r'), 2);
   EXPECT_EQ(s.find('\n'), std::string::npos);  // a single line, redrawn in place
-  EXPECT_NE(s.find("\r[--------] segment 0/4  5 bricks  1.0 MB  0.0s\x1b[K"), std::string::npos) << s;
-  EXPECT_NE(s.find("\r[##------] segment 1/4  12 bricks  2.5 MB  2.0s  ETA ~6.0s\x1b[K"), std::string::npos) << s;
+  EXPECT_NE(s.find("\r[--------] segment 0/4  2.56k voxels  1.0 MB  0.0s  ETA ?\x1b[K"), std::string::npos) << s;
+  EXPECT_NE(s.find("\r[##------] segment 1/4  100 voxels  2.5 MB  2.0s  ETA ~6.0s\x1b[K"), std::string::npos) << s;
   t = 3;
   p.finish();
   const std::string all = out.text();
@@ -176,13 +176,43 @@ TEST(ProgressTest, TerminalModeRedrawsOneLineAndThrottlesData) {
   EXPECT_EQ(l[1], "done: 1 segments, 12 bricks, 100 voxels, 2.50 MB in 3.0s (0.8 MB/s)");
 }
 
+// With the server's estimate the bar moves with every batch and the ETA follows voxels, not segments.
+TEST(ProgressTest, ExpectedVoxelsDriveTheBarAndTheEtaPerBatch) {
+  Capture out;
+  double t = 0;
+  ProgressOptions o;
+  o.mode = ProgressMode::kTerminal;
+  o.out = out.file();
+  o.limit_world = 4;
+  o.segment_length_world = 4;  // one segment: a segment count could not move the bar at all
+  o.expected_voxels = 1000;
+  o.bar_width = 10;
+  o.redraw_interval_s = 0;
+  o.clock = [&t] { return t; };
+  ProgressDisplay p(o);
+  t = 1;
+  p.onData(3, 250, 1000);
+  EXPECT_DOUBLE_EQ(p.fraction(), 0.25);
+  EXPECT_DOUBLE_EQ(p.etaSeconds(1), 3.0);  // 750 voxels left at 250 a second
+  t = 2;
+  p.onData(3, 250, 1000);
+  const std::string s = out.text();
+  EXPECT_NE(s.find("\r[##--------] segment 0/1  250/1k voxels  0.0 MB  1.0s  ETA 3.0s\x1b[K"), std::string::npos) << s;
+  EXPECT_NE(s.find("\r[#####-----] segment 0/1  500/1k voxels  0.0 MB  2.0s  ETA 2.0s\x1b[K"), std::string::npos) << s;
+  p.onData(3, 600, 1000);  // more than expected: the bar waits short of full, the ETA is unknown
+  EXPECT_DOUBLE_EQ(p.fraction(), 0.99);
+  EXPECT_LT(p.etaSeconds(2), 0);
+  p.onSegment(seg(0, 0, 4, 9, 1100, 3000, true));
+  EXPECT_DOUBLE_EQ(p.fraction(), 1.0);
+}
+
 TEST(ProgressTest, QuietModePrintsNothing) {
   Capture out;
   ProgressOptions o;
   o.mode = ProgressMode::kQuiet;
   o.out = out.file();
   ProgressDisplay p(o);
-  p.onData(1, 2);
+  p.onData(1, 1, 2);
   p.onSegment(seg(0, 0, 1, 1, 1, 1, true));
   p.finish();
   EXPECT_EQ(out.text(), "");

@@ -67,6 +67,7 @@ TEST(RemoteCliTest, QueryWritesALevelSetVdbThatMatchesTheEngine) {
   ASSERT_EQ(loadMesh(f.path("cube.obj"), &mesh, nullptr), "");
   MeshGridOptions mo;
   mo.resolution = 40;
+  mo.limit_world = limit;  // the default padding holds the limit
   Grid grid;
   ASSERT_EQ(gridForMesh(mesh, mo, &grid), "");
   MeshSeedOptions so;
@@ -136,10 +137,11 @@ TEST(RemoteCliTest, ServerRejectionIsAUsageErrorAndWritesNothing) {
   // The server's answer reads as a sentence, then its message.
   EXPECT_NE(f.err.str().find("the server refused the request: grid.resolution"), std::string::npos) << f.err.str();
   EXPECT_FALSE(fs::exists(f.path("bad.vdb")));
-  // A .vdb needs a finite limit: refused before contacting the server.
+  // A slice needs a finite limit (its colour scale): refused before contacting the server.
   EXPECT_EQ(f.run({"query", "--server", f.address, "--points", "1,2,3", "--dims", "8,8,8", "--voxel-size", "1",
-                   "--out", f.path("nolimit.vdb")}),
+                   "--slice-png", "z:mid", f.path("nolimit.png")}),
             2);
+  EXPECT_NE(f.err.str().find("--slice-png needs a finite --limit"), std::string::npos) << f.err.str();
 }
 
 TEST(RemoteCliTest, EveryOutputProblemIsReportedBeforeAnyUpload) {

@@ -294,6 +294,7 @@ TEST(ScaleOutTest, MeshMatchesOneServer) {
   ASSERT_TRUE(cluster.coordinator->client().uploadMeshFile(bunny, &up_many).ok());
   v1::QueryRequest r;
   r.mutable_grid()->set_resolution(80);
+  r.mutable_grid()->set_padding(3);  // fixed, so the probe's voxel size stays the grid's with the limit below
   r.set_limit(0.0);  // set below in world units
   // Limit of 4 voxels: the grid is resolved the same way by both (voxel size from the first query's header).
   r.set_asset_id(up_one.asset_id());

@@ -1,0 +1,110 @@
+// FieldOutputs: every file a distance-field command writes, shared by `distband compute` (the in-process engine)
+// and `distband query` (a server's stream), so both take the same output flags and write the same files.
+// Contract:
+//   * checkOutputFlags() validates the flags before any upload or compute: each path's extension and writable
+//     directory, the slice spec, the isosurface value (against the limit when it is given in world units), and
+//     that a slice or isosurface has a finite limit (beyond it the field holds only the background). Messages name
+//     the flag.
+//   * open() once the grid and limit are known (the seeds, or the stream's header): resolves the slice against
+//     the grid, checks the isosurface against the limit in force, and allocates what the files are built from.
+//   * add() buffers delivered bricks; commitSegment() hands the buffered segment to the builders. Only committed
+//     (complete) segments are ever written, so an interrupted run keeps every complete segment received and
+//     nothing of a half-delivered one. Peak memory: the builders plus the open segment's bricks.
+//   * finish() writes every file atomically (a temporary beside the target, renamed over it): the field (.npy or
+//     .vdb), the closest-feature ids (.npy: int32 for triangles and points, int64 for voxels; -1 where nothing
+//     was delivered), the metadata JSON, the slice PNG and the isosurface OBJ. It returns the first error; `lines`
+//     gets one "wrote ..." line per file. When the run is incomplete and no --meta was given, the metadata is
+//     written beside the field anyway (FIELD.json): an incomplete field must not pass for a complete one.
+// Not thread-safe: one caller.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "client/brick_sink.h"
+#include "core/brick.h"
+#include "core/grid.h"
+#include "core/io/slice_png.h"
+
+namespace CLI {
+class App;
+}
+
+namespace distband {
+
+/// The output flags as given on the command line.
+struct OutputFlags {
+  std::string out;                      ///< --out FIELD.npy | FIELD.vdb
+  std::string npy;                      ///< --npy FIELD.npy (a second, dense copy; may be empty)
+  std::string meta;                     ///< --meta FIELD.json
+  std::string closest;                  ///< --closest IDS.npy
+  std::vector<std::string> slice_png;   ///< --slice-png AXIS:INDEX PNG
+  std::vector<std::string> isosurface;  ///< --isosurface D OBJ
+};
+
+/// Registers --out, --npy, --meta, --closest, --slice-png and --isosurface on a command (compute and query).
+void addOutputFlags(CLI::App* command, OutputFlags* flags);
+
+/// What checkOutputFlags() parsed.
+struct OutputPlan {
+  OutputFlags flags;
+  SliceSpec slice;
+  double isosurface = 0;  ///< world units
+  bool wants_closest() const { return !flags.closest.empty(); }
+};
+
+/// `limit_world`: the limit in world units when known (+infinity: none), or NaN when given in voxels (checked in
+/// open()). Returns "" or a message naming the flag.
+std::string checkOutputFlags(const OutputFlags& flags, double limit_world, OutputPlan* plan);
+
+/// What the files describe: known once the grid is.
+struct FieldDescription {
+  Grid grid;
+  double limit_world = 0;  ///< +infinity: no limit
+  bool signed_distance = false;
+  std::shared_ptr<const std::vector<uint8_t>> inside;  ///< see FieldLayout
+  bool sign_from_band = false;                         ///< see FieldLayout
+  std::string stencil, mode, sign, sign_reason;
+  int padding_voxels = -1;  ///< -1: explicit dims
+  bool band_clipped = false;
+  double segment_length_world = 0;
+  std::string closest_feature;  ///< "triangle", "point", "voxel", or "" when the bricks carry none
+};
+
+struct RunOutcome {
+  bool complete = true;  ///< false: interrupted (only the committed segments are written)
+  int64_t voxels = 0;
+  double seconds = 0;
+};
+
+class FieldOutputs {
+ public:
+  explicit FieldOutputs(OutputPlan plan);
+  ~FieldOutputs();
+
+  /// Returns "" or a message naming the flag (a slice outside the grid, an isosurface beyond the limit, ...).
+  std::string open(const FieldDescription& field);
+  void add(SegmentBricks&& batch);
+  /// The buffered bricks form a complete segment whose |distance| range ends at `upper_world`.
+  void commitSegment(double upper_world);
+  int committedSegments() const { return segments_; }
+  double completeUpTo() const { return complete_up_to_; }  ///< upper end of the last committed segment
+  std::string finish(const RunOutcome& run, std::vector<std::string>* lines);
+
+ private:
+  void build(const SegmentBricks& batch);
+  std::string writeClosest();
+
+  OutputPlan plan_;
+  FieldDescription field_;
+  std::vector<SegmentBricks> open_segment_;
+  int segments_ = 0;
+  double complete_up_to_ = 0;
+  std::unique_ptr<BrickSink> npy_;
+  std::unique_ptr<class VdbFieldBuilder> vdb_;
+  std::vector<int64_t> closest_;  ///< dense, x fastest
+};
+
+}  // namespace distband
