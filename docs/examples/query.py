@@ -1,7 +1,11 @@
-#!/usr/bin/env python3
-"""A minimal distband.v1 client in Python (the example of docs/protocol.md).
+#!/usr/bin/python3
+"""A minimal distband.v1 client in Python on the raw protocol (the example of docs/protocol.md).
 
-Generate the stubs first:
+distband_client (docs/python.md) is the ready-made helper. The build generates the stubs this needs into
+build/python; run it with Debian's interpreter (python3-grpcio, python3-protobuf):
+  PYTHONPATH=build/python /usr/bin/python3 docs/examples/query.py 127.0.0.1:50051
+or generate them by hand:
+  mkdir -p py
   protoc -I proto --python_out=py --grpc_out=py --plugin=protoc-gen-grpc=/usr/bin/grpc_python_plugin \
       proto/distband/v1/distband.proto
 """
@@ -37,7 +41,7 @@ def query_points(target, points, dims, voxel_size=1.0, segment=4.0, limit=0.0):
 
 
 if __name__ == "__main__":
-    # Usage: PYTHONPATH=<generated stubs> python3 docs/examples/query.py HOST:PORT
+    # Usage: PYTHONPATH=build/python /usr/bin/python3 docs/examples/query.py HOST:PORT
     # Two points on a 40x32x24 grid; checks the streamed field against numpy brute force (exact for points).
     target = sys.argv[1] if len(sys.argv) > 1 else "127.0.0.1:50051"
     pts, dims = [(5.2, 6.1, 7.7), (30.0, 20.5, 12.3)], (40, 32, 24)
