@@ -380,6 +380,9 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
       const VoxelSampler sample = [&](const Coord& c) { return acc.getValue(openvdb::Coord(c.x, c.y, c.z)); };
       SlicePngOptions so;
       so.limit_world = result.header.limit();
+      so.sign = result.header.signed_() ? SliceSign::kSigned : SliceSign::kUnsigned;
+      // The input file's name leads the title (none for point lists and stored assets).
+      so.title_prefix = std::filesystem::path(!a.mesh.empty() ? a.mesh : a.volume).filename().string();
       if (std::string e = writeSlicePng(a.slice_png[1], result.grid, sample, slice, so); !e.empty()) fail(e);
       else ctx.out << "wrote " << a.slice_png[1] << " (slice " << a.slice_png[0] << ")\n";
     }
