@@ -84,7 +84,7 @@ struct SlicePngOptions {
   /// Distance (world units) at which the colours saturate. <= 0 or non-finite: the largest finite |value| in
   /// the slice (1 if the slice is all zero).
   double limit_world = 0;
-  /// Pixels per voxel along each axis. 0: automatic — the smallest factor making the longer image edge at
+  /// Pixels per voxel along each axis. 0: automatic — the smallest factor making the slice's longer edge at
   /// least 512 pixels, capped at 16.
   int scale = 0;
   bool draw_contour = true;
@@ -113,7 +113,7 @@ struct SlicePngInfo {
   double limit_world = 0;     ///< saturation distance used
   int64_t contour_voxels = 0; ///< voxels drawn as zero contour
   PixelRect slice;            ///< where the slice's pixels are
-  PixelRect title;            ///< the title's text line (empty without a title)
+  PixelRect title;            ///< the title's text line (empty without a title; cut off past the image edge)
   PixelRect bar;              ///< the colour bar's gradient, without its frame (empty without a bar)
   bool signed_bar = true;     ///< the bar spans -limit..limit (else 0..limit)
   int text_scale = 1;         ///< pixels per font pixel
