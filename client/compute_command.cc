@@ -267,6 +267,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   field.band_clipped = in.padding.band_clipped;
   field.segment_length_world = a.segment;
   field.closest_feature = in.closest_feature;
+  field.title = std::filesystem::path(!a.mesh.empty() ? a.mesh : a.volume).filename().string();
   FieldOutputs outputs(plan);
   if (std::string e = outputs.open(field); !e.empty()) return usage(e);
 

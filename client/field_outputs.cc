@@ -189,6 +189,8 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
       const VoxelSampler sample = [&](const Coord& c) { return acc.getValue(openvdb::Coord(c.x, c.y, c.z)); };
       SlicePngOptions so;
       so.limit_world = field_.limit_world;
+      so.sign = field_.signed_distance ? SliceSign::kSigned : SliceSign::kUnsigned;
+      so.title_prefix = field_.title;
       report(writeSlicePng(f.slice_png[1], field_.grid, sample, plan_.slice, so),
              fmt::format("wrote {} (slice {})", f.slice_png[1], f.slice_png[0]));
     }

@@ -71,6 +71,7 @@ struct FieldDescription {
   bool band_clipped = false;
   double segment_length_world = 0;
   std::string closest_feature;  ///< "triangle", "point", "voxel", or "" when the bricks carry none
+  std::string title;            ///< leads a slice picture's title (e.g. the input file's name)
 };
 
 struct RunOutcome {

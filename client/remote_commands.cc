@@ -280,6 +280,8 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
     field.band_clipped = h.band_clipped();
     field.segment_length_world = h.segment_length();
     field.closest_feature = closestText(h.closest_feature());
+    // The input file's name leads a slice's title (none for point lists and stored assets).
+    field.title = std::filesystem::path(!a.mesh.empty() ? a.mesh : a.volume).filename().string();
     if (std::string e = outputs.open(field); !e.empty()) {
       setup_error = a.limit_voxels > 0 && e.rfind("--isosurface", 0) == 0
                         ? fmt::format("{} (--limit-voxels {:g})", e, a.limit_voxels)

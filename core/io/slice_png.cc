@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cerrno>
 #include <charconv>
@@ -12,6 +13,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <string_view>
 #include <vector>
 
 #include <fmt/format.h>
@@ -34,6 +36,17 @@ void sliceAxes(int axis, int* col_axis, int* row_axis) {
 
 int component(const Coord& c, int axis) { return axis == 0 ? c.x : axis == 1 ? c.y : c.z; }
 void setComponent(Coord* c, int axis, int v) { (axis == 0 ? c->x : axis == 1 ? c->y : c->z) = v; }
+
+/// "[prefix  |  ]z = 64 (world 0.532)  |  distance, world units"
+std::string sliceTitle(const Grid& grid, const SliceSpec& spec, const SlicePngOptions& options) {
+  Coord plane;
+  setComponent(&plane, spec.axis, spec.index);
+  const Vec3d world = grid.worldOf(plane);
+  const double position = spec.axis == 0 ? world.x : spec.axis == 1 ? world.y : world.z;
+  const std::string where = fmt::format("{} = {} (world {:.5g})  |  distance, {}", kAxisNames[spec.axis],
+                                        spec.index, position, options.units);
+  return options.title_prefix.empty() ? where : options.title_prefix + "  |  " + where;
+}
 
 uint8_t blend(uint8_t a, uint8_t b, double t) { return uint8_t(std::lround(a + (double(b) - a) * t)); }
 
@@ -74,14 +87,121 @@ std::string encodePng(std::FILE* file, int width, int height, png_bytepp rows) {
 }
 
 /// Writes through a temporary file in the target's directory, then renames it over `path`.
-std::string writePngAtomically(const std::string& path, int width, int height, std::vector<uint8_t>& pixels) {
+std::string writePngAtomically(const std::string& path, RgbImage& image) {
+  const int width = image.width, height = image.height;
   std::vector<png_bytep> rows(static_cast<size_t>(height));
-  for (int r = 0; r < height; ++r) rows[size_t(r)] = pixels.data() + size_t(r) * size_t(width) * 3;
+  for (int r = 0; r < height; ++r) rows[size_t(r)] = image.pixel(0, r);
 
   std::string tmp;
   std::FILE* file = nullptr;
   if (std::string err = openTempBeside(path, "wb", &tmp, &file); !err.empty()) return err;
   return commitTemp(file, tmp, path, encodePng(file, width, height, rows.data()));
+}
+
+/// Glyph scale for the annotations, from the slice's longer pixel edge (see the header's layout paragraph).
+int textScaleFor(int slice_width, int slice_height) {
+  const int longer = std::max(slice_width, slice_height);
+  return longer < 256 ? 1 : std::clamp(longer / 512 + 1, 2, 4);
+}
+
+constexpr std::string_view kContourLegend = "zero contour";
+
+/// The colour bar's range and its three tick values with their labels.
+struct BarScale {
+  double low = 0, high = 0;
+  std::array<double, 3> ticks{};
+  std::array<std::string, 3> labels;
+};
+
+BarScale barScale(double limit, bool signed_bar) {
+  BarScale bar;
+  bar.low = signed_bar ? -limit : 0.0;
+  bar.high = limit;
+  bar.ticks = {bar.low, (bar.low + bar.high) / 2, bar.high};
+  for (size_t i = 0; i < 3; ++i) bar.labels[i] = fmt::format("{:.4g}", bar.ticks[i]);
+  return bar;
+}
+
+/// Where everything goes in the picture.
+struct Layout {
+  int width = 0, height = 0;
+  int text_scale = 1;
+  int frame = 0;  ///< frame thickness around the slice and the bar
+  PixelRect title, slice, bar;
+  int tick_length = 0;
+  int labels_top = 0;  ///< top of the tick labels' line
+  int legend_top = 0;  ///< top of the units / zero-contour line
+  int swatch_width = 0;
+};
+
+Layout layOut(int slice_width, int slice_height, const SlicePngOptions& options, const std::string& title,
+              const BarScale& bar, bool signed_bar) {
+  Layout l;
+  const int s = l.text_scale = textScaleFor(slice_width, slice_height);
+  const bool decorated = options.draw_title || options.draw_colour_bar;
+  const int pad = decorated ? 6 * s : 0;
+  const int line = kGlyphHeight * s;
+  const int gap = 2 * kGlyphAdvance * s;  // between texts on one line
+  l.frame = decorated ? std::max(1, s / 2) : 0;
+  int y = pad;
+  if (options.draw_title) {
+    l.title = {pad, y, textWidth(title, s), line};
+    y += line + pad;
+  }
+  l.slice = {pad + l.frame, y + l.frame, slice_width, slice_height};
+  y += slice_height + 2 * l.frame;
+  int content_width = slice_width;
+  if (options.draw_colour_bar) {
+    l.swatch_width = 3 * kGlyphAdvance * s;
+    const int labels_width =
+        textWidth(bar.labels[0], s) + textWidth(bar.labels[1], s) + textWidth(bar.labels[2], s) + 2 * gap;
+    const int legend_width = textWidth(options.units, s) + gap + l.swatch_width + kGlyphAdvance * s +
+                             textWidth(kContourLegend, s);
+    int bar_width = std::max({slice_width, labels_width, legend_width});
+    if (signed_bar) bar_width |= 1;  // odd, so the middle column is exactly 0 (white)
+    y += pad;
+    l.bar = {pad + l.frame, y + l.frame, bar_width, 2 * line};
+    y += l.bar.height + 2 * l.frame;
+    l.tick_length = 3 * s;
+    l.labels_top = y + l.tick_length + s;
+    l.legend_top = l.labels_top + line + pad;
+    y = l.legend_top + line;
+    content_width = std::max(content_width, bar_width);
+  }
+  l.height = y + pad;
+  l.width = content_width + 2 * (pad + l.frame);
+  // A long title widens the picture up to the edge limit and is cut off beyond it.
+  if (options.draw_title) l.width = std::max(l.width, std::min(kSliceMaxImageEdge, l.title.width + 2 * pad));
+  return l;
+}
+
+/// The colour bar, its ticks, tick labels and legend (units, zero-contour swatch).
+void drawColourBar(RgbImage* image, const Layout& l, const BarScale& bar, double limit, const std::string& units) {
+  const int s = l.text_scale;
+  const PixelRect& r = l.bar;
+  image->fillRect(r.left - l.frame, r.top - l.frame, r.width + 2 * l.frame, r.height + 2 * l.frame,
+                  kSliceFrameColour);
+  // Column i shows low + (high - low) * i / (width - 1): both ends exact.
+  auto columnOf = [&](double v) { return int(std::lround((v - bar.low) / (bar.high - bar.low) * (r.width - 1))); };
+  for (int i = 0; i < r.width; ++i) {
+    const double v = bar.low + (bar.high - bar.low) * i / (r.width - 1);
+    image->fillRect(r.left + i, r.top, 1, r.height, sliceColour(float(v), limit));
+  }
+  const int ticks_top = r.top + r.height + l.frame;
+  const int right = r.left + r.width;
+  for (size_t t = 0; t < 3; ++t) {
+    const int x = r.left + columnOf(bar.ticks[t]);
+    image->fillRect(x - (s - 1) / 2, ticks_top, s, l.tick_length, kSliceTextColour);
+    // Labels sit under their ticks; the end ones are aligned to the bar's ends so they stay inside the image.
+    const int w = textWidth(bar.labels[t], s);
+    const int label_left = t == 0 ? r.left : t == 2 ? right - w : x - w / 2;
+    drawText(image, label_left, l.labels_top, bar.labels[t], s, kSliceTextColour);
+  }
+  drawText(image, r.left, l.legend_top, units, s, kSliceTextColour);
+  const int legend_text_left = right - textWidth(kContourLegend, s);
+  const int swatch_left = legend_text_left - kGlyphAdvance * s - l.swatch_width;
+  image->fillRect(swatch_left, l.legend_top + 2 * s, l.swatch_width, 3 * s, kSliceContourColour);
+  drawText(image, legend_text_left, l.legend_top, kContourLegend, s, kSliceTextColour);
 }
 
 }  // namespace
@@ -194,22 +314,38 @@ std::string writeSlicePng(const std::string& path, const Grid& grid, const Voxel
       }
   }
 
-  const int width = cols * scale, height = rows * scale;
-  std::vector<uint8_t> pixels(size_t(width) * size_t(height) * 3);
+  bool signed_bar = options.sign == SliceSign::kSigned;
+  if (options.sign == SliceSign::kAuto)
+    signed_bar = std::any_of(values.begin(), values.end(), [](float v) { return std::isfinite(v) && v < 0; });
+  const BarScale bar = barScale(limit, signed_bar);
+  const std::string title = sliceTitle(grid, spec, options);
+  const Layout layout = layOut(cols * scale, rows * scale, options, title, bar, signed_bar);
+  if (layout.width > kSliceMaxImageEdge || layout.height > kSliceMaxImageEdge)
+    return fmt::format("slice image {}x{} voxels at scale {} needs {}x{} pixels with its title and colour bar, "
+                       "which exceeds the {}-pixel edge limit",
+                       cols, rows, scale, layout.width, layout.height, kSliceMaxImageEdge);
+
+  RgbImage image(layout.width, layout.height, kSliceMarginColour);
+  const PixelRect& area = layout.slice;
+  image.fillRect(area.left - layout.frame, area.top - layout.frame, area.width + 2 * layout.frame,
+                 area.height + 2 * layout.frame, kSliceFrameColour);
   for (int r = 0; r < rows; ++r) {
-    const int top = (rows - 1 - r) * scale;  // flip: largest row coordinate at the top
+    const int top = area.top + (rows - 1 - r) * scale;  // flip: largest row coordinate at the top
     for (int c = 0; c < cols; ++c) {
       const size_t i = size_t(r) * cols + c;
       const Rgb8 colour = contour[i] ? kSliceContourColour : sliceColour(values[i], limit);
-      for (int dy = 0; dy < scale; ++dy) {
-        uint8_t* px = pixels.data() + (size_t(top + dy) * width + size_t(c) * scale) * 3;
-        for (int dx = 0; dx < scale; ++dx, px += 3) std::memcpy(px, colour.data(), 3);
-      }
+      image.fillRect(area.left + c * scale, top, scale, scale, colour);
     }
   }
+  if (options.draw_title)
+    drawText(&image, layout.title.left, layout.title.top, title, layout.text_scale, kSliceTextColour);
+  if (options.draw_colour_bar) drawColourBar(&image, layout, bar, limit, options.units);
 
-  if (std::string err = writePngAtomically(path, width, height, pixels); !err.empty()) return err;
-  if (info) *info = {width, height, scale, limit, contour_voxels};
+  if (std::string err = writePngAtomically(path, image); !err.empty()) return err;
+  if (info)
+    *info = {.width = layout.width, .height = layout.height, .scale = scale, .limit_world = limit,
+             .contour_voxels = contour_voxels, .slice = layout.slice, .title = layout.title, .bar = layout.bar,
+             .signed_bar = signed_bar, .text_scale = layout.text_scale};
   return {};
 }
 

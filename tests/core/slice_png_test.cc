@@ -1,16 +1,20 @@
 // Tests for core/io/slice_png: geometry, colours and contour of a slice of an analytic sphere, read back with
-// libpng; parsing and range errors.
+// libpng; the title strip and colour bar around it; the bitmap font; parsing and range errors.
 #include "core/io/slice_png.h"
+
+#include "core/io/bitmap_font.h"
 
 #include <png.h>
 #include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -78,15 +82,16 @@ TEST_F(SlicePngTest, SphereSliceHasSizeColoursAndContourWhereExpected) {
   ASSERT_EQ(writeSlicePng(file, kGrid, sphereSample, {1, 32}, options, &info), "");
   // Automatic scale: 512 / 64 = 8 pixels per voxel.
   EXPECT_EQ(info.scale, 8);
-  EXPECT_EQ(info.width, 512);
-  EXPECT_EQ(info.height, 512);
+  EXPECT_EQ(info.slice.width, 512);
+  EXPECT_EQ(info.slice.height, 512);
   EXPECT_DOUBLE_EQ(info.limit_world, 5);
 
   const Image img = readPng(file);
-  ASSERT_EQ(img.width, 512);
-  ASSERT_EQ(img.height, 512);
-  // Axis y: columns are x, rows are z with the largest z at the top.
-  auto pixelOf = [&](int x, int z) { return img.at(x * 8 + 4, (63 - z) * 8 + 4); };
+  ASSERT_EQ(img.width, info.width);
+  ASSERT_EQ(img.height, info.height);
+  // Axis y: columns are x, rows are z with the largest z at the top; the slice starts at info.slice's corner.
+  auto sliceAt = [&](int x, int y) { return img.at(info.slice.left + x, info.slice.top + y); };
+  auto pixelOf = [&](int x, int z) { return sliceAt(x * 8 + 4, (63 - z) * 8 + 4); };
   // Centre of the sphere: 10.2 inside, saturated inside colour.
   EXPECT_EQ(pixelOf(32, 20), kSliceInsideColour);
   // Top middle (z = 63): 21.5 - 10.2 = 11.3 outside, saturated red.
@@ -133,8 +138,8 @@ TEST_F(SlicePngTest, SphereSliceHasSizeColoursAndContourWhereExpected) {
       }
       // Every pixel of a voxel's 8x8 block has the same colour.
       const Rgb8 c = pixelOf(x, z);
-      EXPECT_EQ(img.at(x * 8, (63 - z) * 8), c);
-      EXPECT_EQ(img.at(x * 8 + 7, (63 - z) * 8 + 7), c);
+      EXPECT_EQ(sliceAt(x * 8, (63 - z) * 8), c);
+      EXPECT_EQ(sliceAt(x * 8 + 7, (63 - z) * 8 + 7), c);
     }
   EXPECT_EQ(black, info.contour_voxels);
   // The circle has circumference 2*pi*20.4 voxels ~ 128; a 4-connected contour holds more voxels than that.
@@ -152,14 +157,16 @@ TEST_F(SlicePngTest, DenseFieldGivesTheSameImageAsTheSampler) {
   SlicePngOptions options;
   options.scale = 2;
   options.limit_world = 4;
-  ASSERT_EQ(writeSlicePng(path("a.png"), kGrid, sphereSample, {0, 40}, options), "");
+  SlicePngInfo info;
+  ASSERT_EQ(writeSlicePng(path("a.png"), kGrid, sphereSample, {0, 40}, options, &info), "");
   ASSERT_EQ(writeSlicePng(path("b.png"), field, {0, 40}, options), "");
   const Image a = readPng(path("a.png")), b = readPng(path("b.png"));
-  EXPECT_EQ(a.width, 128);
-  EXPECT_EQ(a.height, 128);
+  EXPECT_EQ(info.slice.width, 128);
+  EXPECT_EQ(info.slice.height, 128);
   EXPECT_EQ(a.rgb, b.rgb);
   // Axis x: columns are y, rows z. Voxel (40, 32, 20) is 4 voxels = 2 world units off-centre: inside.
-  EXPECT_EQ(a.at(32 * 2, (63 - 20) * 2), sliceColour(float(sphereDistance({40, 32, 20})), 4));
+  EXPECT_EQ(a.at(info.slice.left + 32 * 2, info.slice.top + (63 - 20) * 2),
+            sliceColour(float(sphereDistance({40, 32, 20})), 4));
 }
 
 TEST_F(SlicePngTest, AutomaticLimitAndScaleForSmallGrids) {
@@ -169,14 +176,16 @@ TEST_F(SlicePngTest, AutomaticLimitAndScaleForSmallGrids) {
                 path("small.png"), grid, [](const Coord& c) { return float(c.x) - 4.5f; }, {2, 1}, {}, &info),
             "");
   EXPECT_EQ(info.scale, 16);  // 512 / 10 → 52, capped at 16
-  EXPECT_EQ(info.width, 160);
-  EXPECT_EQ(info.height, 96);
+  EXPECT_EQ(info.slice.width, 160);
+  EXPECT_EQ(info.slice.height, 96);
+  EXPECT_EQ(info.text_scale, 1);  // below 256 pixels
   EXPECT_DOUBLE_EQ(info.limit_world, 4.5);  // max |x - 4.5| over the slice
   EXPECT_EQ(info.contour_voxels, 6);        // x = 4 (value -0.5) in every row; ties go inside
   const Image img = readPng(path("small.png"));
-  EXPECT_EQ(img.at(4 * 16 + 8, 8), kSliceContourColour);
-  EXPECT_EQ(img.at(5 * 16 + 8, 8), sliceColour(0.5f, 4.5));
-  EXPECT_EQ(img.at(9 * 16 + 8, 8), kSliceOutsideColour);
+  const int left = info.slice.left, top = info.slice.top;
+  EXPECT_EQ(img.at(left + 4 * 16 + 8, top + 8), kSliceContourColour);
+  EXPECT_EQ(img.at(left + 5 * 16 + 8, top + 8), sliceColour(0.5f, 4.5));
+  EXPECT_EQ(img.at(left + 9 * 16 + 8, top + 8), kSliceOutsideColour);
 }
 
 TEST_F(SlicePngTest, BackgroundSeamsAreNotDrawnAsContours) {
@@ -196,6 +205,230 @@ TEST_F(SlicePngTest, BackgroundSeamsAreNotDrawnAsContours) {
   ASSERT_EQ(writeSlicePng(path("seam3.png"), grid, [](const Coord& c) { return c.x - 9.5f; }, {2, 0}, none, &info),
             "");
   EXPECT_EQ(info.contour_voxels, 0);
+}
+
+/// The pixels of `rect` in `img`, row by row (for comparing a region with a whole image).
+std::vector<uint8_t> crop(const Image& img, const PixelRect& rect) {
+  std::vector<uint8_t> out;
+  for (int y = rect.top; y < rect.top + rect.height; ++y)
+    for (int x = rect.left; x < rect.left + rect.width; ++x) {
+      const Rgb8 c = img.at(x, y);
+      out.insert(out.end(), c.begin(), c.end());
+    }
+  return out;
+}
+
+/// The colour bar's middle row, left to right.
+std::vector<Rgb8> barRow(const Image& img, const PixelRect& bar) {
+  std::vector<Rgb8> out;
+  for (int x = bar.left; x < bar.left + bar.width; ++x) out.push_back(img.at(x, bar.top + bar.height / 2));
+  return out;
+}
+
+bool contains(const PixelRect& outer, const PixelRect& inner) {
+  return inner.left >= outer.left && inner.top >= outer.top && inner.left + inner.width <= outer.left + outer.width &&
+         inner.top + inner.height <= outer.top + outer.height;
+}
+
+TEST_F(SlicePngTest, TitleAndColourBarSurroundTheUnchangedSlice) {
+  SlicePngOptions bare;
+  bare.limit_world = 5;
+  bare.draw_title = false;
+  bare.draw_colour_bar = false;
+  SlicePngInfo bare_info;
+  ASSERT_EQ(writeSlicePng(path("bare.png"), kGrid, sphereSample, {1, 32}, bare, &bare_info), "");
+  // Without decorations the picture is the slice alone, as before the title and bar existed.
+  EXPECT_EQ(bare_info.width, 512);
+  EXPECT_EQ(bare_info.height, 512);
+  EXPECT_EQ(bare_info.slice.left, 0);
+  EXPECT_EQ(bare_info.slice.top, 0);
+
+  SlicePngOptions decorated;
+  decorated.limit_world = 5;
+  SlicePngInfo info;
+  ASSERT_EQ(writeSlicePng(path("decorated.png"), kGrid, sphereSample, {1, 32}, decorated, &info), "");
+  const Image img = readPng(path("decorated.png")), bare_img = readPng(path("bare.png"));
+  ASSERT_EQ(img.width, info.width);
+  ASSERT_EQ(img.height, info.height);
+  EXPECT_EQ(info.text_scale, 2);  // 512-pixel slice
+  // Same slice pixels, same scale and orientation, moved by the margin and the title strip.
+  EXPECT_EQ(info.slice.width, bare_info.slice.width);
+  EXPECT_EQ(info.slice.height, bare_info.slice.height);
+  EXPECT_EQ(crop(img, info.slice), bare_img.rgb);
+  // Title above the slice, bar below it, all inside the image.
+  const PixelRect whole{0, 0, img.width, img.height};
+  EXPECT_TRUE(contains(whole, info.slice));
+  EXPECT_TRUE(contains(whole, info.title));
+  EXPECT_TRUE(contains(whole, info.bar));
+  EXPECT_LT(info.title.top + info.title.height, info.slice.top);
+  EXPECT_GT(info.bar.top, info.slice.top + info.slice.height);
+  // The frame around the slice is neither margin nor slice.
+  EXPECT_EQ(img.at(info.slice.left - 1, info.slice.top + 100), kSliceFrameColour);
+  EXPECT_EQ(img.at(info.slice.left + info.slice.width, info.slice.top + 100), kSliceFrameColour);
+}
+
+TEST_F(SlicePngTest, TitleStripCarriesTheSlicePositionAsText) {
+  SlicePngOptions options;
+  options.limit_world = 5;
+  SlicePngInfo at3, at40, prefixed;
+  ASSERT_EQ(writeSlicePng(path("z3.png"), kGrid, sphereSample, {2, 3}, options, &at3), "");
+  ASSERT_EQ(writeSlicePng(path("z40.png"), kGrid, sphereSample, {2, 40}, options, &at40), "");
+  const Image z3 = readPng(path("z3.png")), z40 = readPng(path("z40.png"));
+  // Text pixels in the title line, and only margin in the strip's first row above it.
+  int text_pixels = 0;
+  for (int y = at3.title.top; y < at3.title.top + at3.title.height; ++y)
+    for (int x = 0; x < z3.width; ++x) text_pixels += z3.at(x, y) == kSliceTextColour;
+  EXPECT_GT(text_pixels, 100);
+  for (int x = 0; x < z3.width; ++x) ASSERT_EQ(z3.at(x, 0), kSliceMarginColour) << x;
+  // "z = 3 (world -6.5)" against "z = 40 (world 12)": the title reflects the slice position.
+  EXPECT_NE(crop(z3, at3.title), crop(z40, at40.title));
+  EXPECT_EQ(at3.title.width, textWidth("z = 3 (world -6.5)  |  distance, world units", at3.text_scale));
+  EXPECT_EQ(at40.title.width, textWidth("z = 40 (world 12)  |  distance, world units", at40.text_scale));
+  // A prefix and other units lengthen the line by exactly their text.
+  options.title_prefix = "bunny.obj";
+  options.units = "mm";
+  ASSERT_EQ(writeSlicePng(path("prefixed.png"), kGrid, sphereSample, {2, 3}, options, &prefixed), "");
+  EXPECT_EQ(prefixed.title.width,
+            textWidth("bunny.obj  |  z = 3 (world -6.5)  |  distance, mm", prefixed.text_scale));
+}
+
+TEST_F(SlicePngTest, SignedBarRunsFromInsideThroughWhiteToOutside) {
+  SlicePngOptions options;
+  options.limit_world = 0.25;
+  SlicePngInfo info;
+  ASSERT_EQ(writeSlicePng(path("bar.png"), kGrid, sphereSample, {2, 20}, options, &info), "");
+  EXPECT_TRUE(info.signed_bar);  // the sphere's inside is negative
+  const Image img = readPng(path("bar.png"));
+  const std::vector<Rgb8> row = barRow(img, info.bar);
+  ASSERT_GE(row.size(), 3u);
+  ASSERT_EQ(row.size() % 2, 1u);
+  const size_t middle = row.size() / 2;
+  EXPECT_EQ(row.front(), kSliceInsideColour);
+  EXPECT_EQ(row[middle], kSliceZeroColour);
+  EXPECT_EQ(row.back(), kSliceOutsideColour);
+  // Every channel rises from the inside colour to white, then falls to the outside colour; each column is the
+  // slice's own colour map at its value.
+  for (size_t i = 0; i + 1 < row.size(); ++i)
+    for (int ch = 0; ch < 3; ++ch) {
+      if (i < middle) EXPECT_LE(row[i][ch], row[i + 1][ch]) << i;
+      else EXPECT_GE(row[i][ch], row[i + 1][ch]) << i;
+    }
+  for (size_t i = 0; i < row.size(); ++i)
+    EXPECT_EQ(row[i], sliceColour(float(-0.25 + 0.5 * double(i) / double(row.size() - 1)), 0.25)) << i;
+  // The whole height of the bar is the gradient.
+  for (int y = info.bar.top; y < info.bar.top + info.bar.height; ++y)
+    EXPECT_EQ(img.at(info.bar.left + 1, y), row[1]);
+  // Tick marks under the ends and the middle; labels below them.
+  const int ticks_top = info.bar.top + info.bar.height + 2;
+  EXPECT_EQ(img.at(info.bar.left, ticks_top), kSliceTextColour);
+  EXPECT_EQ(img.at(info.bar.left + int(middle), ticks_top), kSliceTextColour);
+  EXPECT_EQ(img.at(info.bar.left + info.bar.width - 1, ticks_top), kSliceTextColour);
+  EXPECT_EQ(img.at(info.bar.left + int(middle) / 2, ticks_top), kSliceMarginColour);
+  // The legend's zero-contour swatch: contour-coloured pixels below the bar.
+  int swatch = 0;
+  for (int y = ticks_top; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) swatch += img.at(x, y) == kSliceContourColour;
+  EXPECT_GT(swatch, 50);
+}
+
+TEST_F(SlicePngTest, UnsignedBarStartsAtWhite) {
+  // |x - 4.5|: no negative value, so the automatic choice is an unsigned bar over 0..limit.
+  const Grid grid({0, 0, 0}, 1.0, {10, 6, 3});
+  auto unsigned_field = [](const Coord& c) { return std::abs(float(c.x) - 4.5f); };
+  SlicePngInfo info;
+  ASSERT_EQ(writeSlicePng(path("unsigned.png"), grid, unsigned_field, {2, 1}, {}, &info), "");
+  EXPECT_FALSE(info.signed_bar);
+  const Image img = readPng(path("unsigned.png"));
+  const std::vector<Rgb8> row = barRow(img, info.bar);
+  ASSERT_GE(row.size(), 2u);
+  EXPECT_EQ(row.front(), kSliceZeroColour);
+  EXPECT_EQ(row.back(), kSliceOutsideColour);
+  for (size_t i = 0; i + 1 < row.size(); ++i)
+    for (int ch = 0; ch < 3; ++ch) EXPECT_GE(row[i][ch], row[i + 1][ch]) << i;
+
+  // The sign can be forced either way: a signed field drawn unsigned loses its inside half of the bar, an
+  // all-positive slice of a signed field keeps it.
+  SlicePngOptions forced;
+  forced.sign = SliceSign::kUnsigned;
+  ASSERT_EQ(writeSlicePng(path("forced_unsigned.png"), kGrid, sphereSample, {2, 20}, forced, &info), "");
+  EXPECT_FALSE(info.signed_bar);
+  EXPECT_EQ(barRow(readPng(path("forced_unsigned.png")), info.bar).front(), kSliceZeroColour);
+  forced.sign = SliceSign::kSigned;
+  ASSERT_EQ(writeSlicePng(path("forced_signed.png"), grid, unsigned_field, {2, 1}, forced, &info), "");
+  EXPECT_TRUE(info.signed_bar);
+  EXPECT_EQ(barRow(readPng(path("forced_signed.png")), info.bar).front(), kSliceInsideColour);
+}
+
+TEST_F(SlicePngTest, DecoratedImageStaysWithinTheEdgeLimit) {
+  // A slice exactly as wide as the limit fits bare, but not with a margin around it.
+  const Grid wide({0, 0, 0}, 1.0, {kSliceMaxImageEdge, 2, 1});
+  auto ramp = [](const Coord& c) { return float(c.x) - 100.f; };
+  SlicePngOptions options;
+  options.scale = 1;
+  std::string err = writeSlicePng(path("wide.png"), wide, ramp, {2, 0}, options);
+  EXPECT_NE(err.find("pixel edge limit"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(path("wide.png")));
+  options.draw_title = false;
+  options.draw_colour_bar = false;
+  SlicePngInfo info;
+  ASSERT_EQ(writeSlicePng(path("wide.png"), wide, ramp, {2, 0}, options, &info), "");
+  EXPECT_EQ(info.width, kSliceMaxImageEdge);
+  // A very long title widens the picture only up to the limit and is cut off there.
+  SlicePngOptions long_title;
+  long_title.title_prefix = std::string(4000, 'w');
+  ASSERT_EQ(writeSlicePng(path("long.png"), kGrid, sphereSample, {2, 3}, long_title, &info), "");
+  EXPECT_EQ(info.width, kSliceMaxImageEdge);
+  EXPECT_GT(info.title.width, kSliceMaxImageEdge);
+  EXPECT_EQ(readPng(path("long.png")).width, kSliceMaxImageEdge);
+}
+
+/// The font pixels of one character drawn at scale 1, row-major, '#' for set and '.' for clear.
+std::string glyphBitmap(char ch) {
+  RgbImage canvas(kGlyphWidth, kGlyphHeight, {255, 255, 255});
+  drawText(&canvas, 0, 0, std::string_view(&ch, 1), 1, {0, 0, 0});
+  std::string bits;
+  for (int y = 0; y < kGlyphHeight; ++y)
+    for (int x = 0; x < kGlyphWidth; ++x) bits += canvas.pixel(x, y)[0] == 0 ? '#' : '.';
+  return bits;
+}
+
+TEST(BitmapFontTest, EveryGlyphRendersAndDiffers) {
+  const std::string chars = bitmapFontCharacters();
+  for (const char ch : std::string("0123456789abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ .-+=(),:|/_"))
+    EXPECT_NE(chars.find(ch), std::string::npos) << "no glyph for '" << ch << "'";
+  const std::string missing = glyphBitmap('#');  // not in the table: a box
+  EXPECT_EQ(chars.find('#'), std::string::npos);
+  EXPECT_EQ(std::count(missing.begin(), missing.end(), '#'), 2 * kGlyphWidth + 2 * (kGlyphHeight - 2));
+  std::set<std::string> seen;
+  for (const char ch : chars) {
+    const std::string bits = glyphBitmap(ch);
+    if (ch == ' ') {
+      EXPECT_EQ(bits.find('#'), std::string::npos);
+      continue;
+    }
+    EXPECT_NE(bits.find('#'), std::string::npos) << "'" << ch << "' draws nothing";
+    EXPECT_NE(bits, missing) << "'" << ch << "' looks like a missing glyph";
+    EXPECT_TRUE(seen.insert(bits).second) << "'" << ch << "' has the bitmap of an earlier glyph";
+  }
+}
+
+TEST(BitmapFontTest, ScaleWidthAndClipping) {
+  EXPECT_EQ(textWidth("", 2), 0);
+  EXPECT_EQ(textWidth("7", 1), kGlyphWidth);
+  EXPECT_EQ(textWidth("-0.25", 2), (5 * kGlyphAdvance - 1) * 2);
+  // At scale 3 every font pixel is a 3x3 block: nine times the pixels.
+  RgbImage small(kGlyphWidth, kGlyphHeight, {255, 255, 255});
+  RgbImage large(3 * kGlyphWidth, 3 * kGlyphHeight, {255, 255, 255});
+  drawText(&small, 0, 0, "8", 1, {0, 0, 0});
+  drawText(&large, 0, 0, "8", 3, {0, 0, 0});
+  EXPECT_EQ(std::count(large.rgb.begin(), large.rgb.end(), 0), 9 * std::count(small.rgb.begin(), small.rgb.end(), 0));
+  EXPECT_EQ(large.pixel(3 * 1, 0)[0], 0);  // '8' row 0 is .###.: font column 1 → pixels 3..5
+  EXPECT_EQ(large.pixel(2, 0)[0], 255);
+  // Text partly outside the image is clipped, not written out of bounds.
+  RgbImage clipped(8, 8, {255, 255, 255});
+  drawText(&clipped, -3, -4, "W88", 2, {0, 0, 0});
+  EXPECT_EQ(clipped.rgb.size(), size_t(8 * 8 * 3));
+  EXPECT_GT(std::count(clipped.rgb.begin(), clipped.rgb.end(), 0), 0);
 }
 
 TEST(SliceSpecTest, ParsesAxisAndIndex) {
