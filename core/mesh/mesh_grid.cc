@@ -75,7 +75,7 @@ std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid
   }
   if (!o.box_min) {
     const double limit_voxels = o.limit_voxels > 0 ? o.limit_voxels : o.limit_world / h;
-    padding.band_clipped = padding.voxels < limit_voxels - 1e-9;
+    padding.band_clipped = std::isfinite(limit_voxels) && padding.voxels < limit_voxels - 1e-9;
   }
   const double pad = padding.voxels;
   auto count = [&](double e) {

@@ -3,7 +3,9 @@
 // with a clear message for every kind of bad flag or input file.
 #include "client/compute_command.h"
 
+#include <atomic>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -15,6 +17,8 @@
 
 #include "client/cli.h"
 #include "core/io/npy.h"
+#include "core/mesh/triangle_mesh.h"
+#include "tests/support/brute_mesh.h"
 
 namespace distband {
 namespace {
@@ -219,6 +223,142 @@ TEST(ComputeCommandTest, ListParsers) {
   EXPECT_EQ(parsePointList("1,2,3;4,5,6;", &pts), "");
   ASSERT_EQ(pts.size(), 2u);
   EXPECT_EQ(pts[1], (Vec3d{4, 5, 6}));
+}
+
+}  // namespace
+}  // namespace distband
+
+namespace distband {
+namespace {
+
+// Sets a flag once the text written to it contains `needle` (the watch thread reads only the flag).
+class Tripwire : public std::stringbuf {
+ public:
+  explicit Tripwire(std::string needle) : needle_(std::move(needle)) {}
+  std::atomic<bool> tripped{false};
+
+ protected:
+  std::streamsize xsputn(const char* s, std::streamsize n) override {
+    const std::streamsize r = std::stringbuf::xsputn(s, n);
+    if (str().find(needle_) != std::string::npos) tripped = true;
+    return r;
+  }
+  int overflow(int c) override {
+    const int r = std::stringbuf::overflow(c);
+    if (str().find(needle_) != std::string::npos) tripped = true;
+    return r;
+  }
+
+ private:
+  std::string needle_;
+};
+
+std::string readText(const std::string& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// Ctrl-C after a few segments: the complete ones are written (atomically) with complete=false metadata beside the
+// field, every voxel up to the last complete segment's bound holds its exact distance, the rest the background.
+TEST(ComputeCommandTest, InterruptKeepsEveryCompleteSegment) {
+  const std::string out = tmp("interrupted.npy"), meta = tmp("interrupted.json");
+  std::remove(out.c_str());
+  std::remove(meta.c_str());
+  Tripwire trip("segment   3");
+  std::ostream out_stream(&trip);
+  std::ostringstream err;
+  const CliContext ctx{out_stream, err, [&trip] { return trip.tripped.load(); }};
+  const int code = runDistband({"compute", "--points", "80,80,80", "--dims", "160,160,160", "--segment", "0.5",
+                                "--threads", "2", "--out", out},
+                               ctx);
+  ASSERT_EQ(code, kExitInterrupted) << trip.str() << err.str();
+  EXPECT_NE(err.str().find("interrupted; kept the"), std::string::npos) << err.str();
+  EXPECT_NE(err.str().find("complete=false"), std::string::npos) << err.str();
+  const std::string json = readText(meta);
+  ASSERT_FALSE(json.empty()) << "the metadata goes beside an incomplete field";
+  EXPECT_NE(json.find("\"complete\": false"), std::string::npos) << json;
+  const size_t at = json.find("\"complete_up_to\": ");
+  ASSERT_NE(at, std::string::npos) << json;
+  const double up_to = std::stod(json.substr(at + 18));
+  const size_t seg_at = json.find("\"segments\": ");
+  ASSERT_NE(seg_at, std::string::npos);
+  const int segments = std::stoi(json.substr(seg_at + 12));
+  EXPECT_GE(segments, 4);
+  EXPECT_NEAR(up_to, 0.5 * segments, 1e-9);
+  EXPECT_LT(up_to, 130) << "the run should have been stopped well before its end";
+  std::vector<float> v;
+  Coord d;
+  ASSERT_EQ(readNpyFloat32(out, &v, &d), "");
+  int64_t kept = 0, wrong = 0;
+  for (int z = 0; z < d.z; ++z)
+    for (int y = 0; y < d.y; ++y)
+      for (int x = 0; x < d.x; ++x) {
+        const double exact = std::sqrt(double((x - 80) * (x - 80) + (y - 80) * (y - 80) + (z - 80) * (z - 80)));
+        const float got = v[(size_t(z) * d.y + y) * d.x + x];
+        if (exact <= up_to - 1e-6) {
+          ++kept;
+          wrong += std::abs(got - exact) > 1e-5;
+        } else if (exact > up_to + 1e-6) {
+          wrong += !std::isinf(got);  // beyond the complete segments: the background (no limit: +infinity)
+        }
+      }
+  EXPECT_GT(kept, 20);  // at least the 4 segments up to 2 voxels
+  EXPECT_EQ(wrong, 0);
+  std::remove(out.c_str());
+  std::remove(meta.c_str());
+}
+
+// compute writes what query writes: closest-feature ids (checked against the brute-force distance of the recorded
+// triangle), a slice picture, an isosurface and metadata naming the sign method and why, and the padding.
+TEST(ComputeCommandTest, SharesQuerysOutputsIncludingClosestFeatures) {
+  const std::string mesh_path = std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/fandisk.off";
+  const std::string out = tmp("fandisk.npy"), ids = tmp("fandisk_ids.npy"), png = tmp("fandisk.png"),
+                    obj = tmp("fandisk.obj"), meta = tmp("fandisk.json");
+  const CliResult r = run({"compute", "--mesh", mesh_path, "--resolution", "40", "--limit-voxels", "3", "--out", out,
+                           "--closest", ids, "--slice-png", "z:mid", png, "--isosurface", "0", obj, "--meta", meta});
+  ASSERT_EQ(r.code, 0) << r.err << r.out;
+  EXPECT_NE(r.out.find("sign pseudonormal (auto: the mesh is closed)"), std::string::npos) << r.out;
+  for (const std::string& f : {png, obj}) EXPECT_GT(std::filesystem::file_size(f), 100u) << f;
+  const std::string json = readText(meta);
+  EXPECT_NE(json.find("\"reason\": \"auto: the mesh is closed\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"padding_voxels\": 3"), std::string::npos) << json;
+  EXPECT_NE(json.find("\"feature\": \"triangle\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"complete\": true"), std::string::npos) << json;
+
+  std::vector<float> field;
+  Coord d;
+  ASSERT_EQ(readNpyFloat32(out, &field, &d), "");
+  NpyArray id_array;
+  ASSERT_EQ(readNpy(ids, &id_array), "");
+  EXPECT_EQ(id_array.descr, "<i4");
+  ASSERT_EQ(id_array.data.size(), field.size() * 4);
+  TriangleMesh mesh;
+  ASSERT_EQ(loadMesh(mesh_path, &mesh, nullptr), "");
+  // The grid as the command built it: origin from the metadata would do too; the npy's voxel (0,0,0) is the origin.
+  const size_t o = json.find("\"origin\": [");
+  ASSERT_NE(o, std::string::npos);
+  std::istringstream origin_text(json.substr(o + 11));
+  Vec3d origin;
+  char comma;
+  origin_text >> origin.x >> comma >> origin.y >> comma >> origin.z;
+  const size_t h_at = json.find("\"voxel_size\": ");
+  const double h = std::stod(json.substr(h_at + 14));
+  const Grid grid(origin, h, d);
+  int64_t with_id = 0, wrong = 0;
+  for (int64_t i = 0; i < int64_t(field.size()); ++i) {
+    int32_t id;
+    std::memcpy(&id, id_array.data.data() + 4 * i, 4);
+    if (id < 0) continue;
+    ++with_id;
+    const Coord c{int(i % d.x), int(i / d.x % d.y), int(i / (int64_t(d.x) * d.y))};
+    TriangleMesh one;
+    for (uint32_t v : mesh.triangles[size_t(id)]) one.vertices.push_back(mesh.vertices[v]);
+    one.triangles = {{0, 1, 2}};
+    wrong += std::abs(testing::bruteDistance(one, grid.worldOf(c)) - std::abs(double(field[size_t(i)]))) > 1e-5 * h + 1e-6;
+  }
+  EXPECT_GT(with_id, 1000);
+  EXPECT_EQ(wrong, 0);
+  for (const std::string& f : {out, ids, png, obj, meta}) std::remove(f.c_str());
 }
 
 }  // namespace

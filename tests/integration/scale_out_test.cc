@@ -111,6 +111,59 @@ TEST(ScaleOutTest, PointFieldsAreBitIdenticalToOneServerAndNearestFirst) {
   }
 }
 
+std::vector<uint8_t> blobMask(const Coord& dims);
+
+// Closest-feature ids through the coordinator: the tiles' point indices are mapped back to the request's (the ids
+// then equal one server's), volume ids name voxels of the whole grid at exactly the delivered distance.
+TEST(ScaleOutTest, ClosestFeaturesCrossTilesIntact) {
+  Cluster cluster;
+  const Coord dims{96, 80, 72};
+  const double h = 0.5;
+  const auto points = randomPoints(25, 40.0, 3);
+  v1::QueryRequest request = pointsRequest(points, dims, h, 1.5, 6.0);
+  request.set_closest_feature(true);
+  const Streamed one = stream(cluster.replicas[0]->client(), request, -1.0f);
+  const Streamed many = stream(cluster.coordinator->client(), request, -1.0f);
+  ASSERT_TRUE(many.result.status.ok()) << many.result.status.error_message();
+  EXPECT_EQ(many.result.header.closest_feature(), v1::CLOSEST_FEATURE_POINT);
+  ASSERT_FALSE(one.closest.empty());
+  ASSERT_EQ(one.closest.size(), many.closest.size());
+  int64_t delivered = 0, differ = 0;
+  for (size_t i = 0; i < one.closest.size(); ++i) {
+    delivered += one.closest[i] >= 0;
+    differ += one.closest[i] != many.closest[i];
+  }
+  EXPECT_GT(delivered, 10000);
+  EXPECT_EQ(differ, 0);
+
+  const Coord vdims{72, 70, 64};
+  const auto mask = blobMask(vdims);
+  v1::UploadReply up;
+  ASSERT_TRUE(cluster.coordinator->client().uploadVolume(vdims, mask, "blobs", &up).ok());
+  v1::QueryRequest r;
+  r.set_asset_id(up.asset_id());
+  r.mutable_grid()->set_voxel_size(1.0);
+  r.set_limit(4.0);
+  r.set_closest_feature(true);
+  const Streamed vol = stream(cluster.coordinator->client(), r, -1.0f);
+  ASSERT_TRUE(vol.result.status.ok()) << vol.result.status.error_message();
+  EXPECT_EQ(vol.result.header.closest_feature(), v1::CLOSEST_FEATURE_VOXEL);
+  const Grid& grid = vol.field->grid();
+  int64_t checked = 0, wrong = 0;
+  for (int z = 0; z < vdims.z; ++z)
+    for (int y = 0; y < vdims.y; ++y)
+      for (int x = 0; x < vdims.x; ++x) {
+        const int64_t id = vol.closest[size_t(grid.denseIndex({x, y, z}))];
+        if (id < 0) continue;
+        ++checked;
+        const Coord s{int(id % vdims.x), int(id / vdims.x % vdims.y), int(id / (int64_t(vdims.x) * vdims.y))};
+        const double d = (Vec3d{double(x), double(y), double(z)} - Vec3d{double(s.x), double(s.y), double(s.z)}).length();
+        wrong += !mask[size_t(id)] || std::abs(d - vol.field->at({x, y, z})) > 1e-5;
+      }
+  EXPECT_GT(checked, 30000);
+  EXPECT_EQ(wrong, 0);
+}
+
 TEST(ScaleOutTest, ReplicasNamedHostPortAreResolvedByTheCoordinator) {
   std::vector<std::unique_ptr<TestServer>> replicas;
   std::string peers;

@@ -73,6 +73,7 @@ class TestServer {
 struct Streamed {
   RemoteQueryResult result;
   std::unique_ptr<DenseField> field;
+  std::vector<int64_t> closest;         ///< dense closest-feature ids (-1: none) when the header announced them
   std::vector<int> batch_segments;      ///< segment index of each batch, in arrival order
   std::vector<v1::SegmentDone> done;    ///< markers in arrival order
   Clock::time_point first_batch{};
@@ -83,8 +84,9 @@ inline Streamed stream(RemoteClient& client, const v1::QueryRequest& request, fl
                 std::function<bool(int batches)> keep_going = {}) {
   Streamed s;
   RemoteQueryCallbacks cb;
-  cb.on_header = [&](const Grid& grid, const v1::QueryHeader&) {
+  cb.on_header = [&](const Grid& grid, const v1::QueryHeader& h) {
     s.field = std::make_unique<DenseField>(grid, background);
+    if (h.closest_feature() != v1::CLOSEST_FEATURE_NONE) s.closest.assign(size_t(grid.voxelCount()), -1);
     return true;
   };
   cb.on_bricks = [&](SegmentBricks&& batch, uint64_t) {
@@ -104,6 +106,13 @@ inline Streamed stream(RemoteClient& client, const v1::QueryRequest& request, fl
         }
     }
     s.batch_segments.push_back(batch.index);
+    if (!s.closest.empty())
+      for (const Brick& b : batch.bricks)
+        for (int i = 0; i < kBrickVoxels; ++i) {
+          const Coord c = b.origin + brickLocal(i);
+          if (b.mask.test(i) && s.field->grid().contains(c) && b.closest.size() == size_t(kBrickVoxels))
+            s.closest[size_t(s.field->grid().denseIndex(c))] = b.closest[size_t(i)];
+        }
     s.field->add(batch);
     return keep_going ? keep_going(int(s.batch_segments.size())) : true;
   };
