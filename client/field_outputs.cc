@@ -32,8 +32,9 @@ void addOutputFlags(CLI::App* cmd, OutputFlags* f) {
   cmd->add_option("--npy", f->npy, "Also write a dense float32 .npy (small grids)");
   cmd->add_option("--meta", f->meta, "Also write a JSON description of the field (grid, units, limit, sign, completeness)");
   cmd->add_option("--closest", f->closest,
-                  "IDS.npy: each voxel's closest feature (mesh triangle or point index: int32; seed voxel's linear "
-                  "index: int64; -1 where not delivered)");
+                  "IDS.npy, or --out's FIELD.vdb (a grid \"closest\" beside the distances): each voxel's closest "
+                  "feature (mesh triangle or point index: int32; seed voxel's linear index: int64; -1 where not "
+                  "delivered)");
   cmd->add_option("--slice-png", f->slice_png,
                   "AXIS:INDEX PNG (e.g. z:mid) - a colour-mapped slice with the zero contour and a colour bar")
       ->expected(2);
@@ -59,8 +60,11 @@ std::string checkOutputFlags(const OutputFlags& f, double limit_world, OutputPla
     files.emplace_back("--meta", f.meta);
   }
   if (!f.closest.empty()) {
-    if (std::string e = checkOutputPath("--closest", f.closest, {".npy"}); !e.empty()) return e;
-    files.emplace_back("--closest", f.closest);
+    if (std::string e = checkOutputPath("--closest", f.closest, {".npy", ".vdb"}); !e.empty()) return e;
+    if (!endsWith(f.closest, ".vdb")) files.emplace_back("--closest", f.closest);
+    else if (f.closest != f.out)  // a grid beside the distances, in the same file
+      return fmt::format("--closest {}: a .vdb closest grid is stored in --out's .vdb: give the same path, or a .npy",
+                         f.closest);
   }
   const bool limit_in_voxels = std::isnan(limit_world);
   const bool finite_limit = limit_in_voxels || std::isfinite(limit_world);
@@ -124,7 +128,10 @@ std::string FieldOutputs::open(const FieldDescription& field) {
     if (std::string e = openBrickSink(npy_path, layout, &npy_); !e.empty()) return e;
   if (endsWith(f.out, ".vdb") || !f.slice_png.empty() || !f.isosurface.empty())
     vdb_ = std::make_unique<VdbFieldBuilder>(field.grid, layout.background);
-  if (plan_.wants_closest()) closest_.assign(size_t(field.grid.voxelCount()), -1);
+  if (plan_.wants_closest()) {
+    if (endsWith(f.closest, ".vdb")) vdb_->addClosestGrid(field.closest_feature == "voxel");
+    else closest_.assign(size_t(field.grid.voxelCount()), -1);
+  }
   return {};
 }
 
@@ -183,7 +190,9 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
     grid->insertMeta("distband_segments", openvdb::Int32Metadata(segments_));
     if (endsWith(f.out, ".vdb"))
       report(vdb_->write(f.out),
-             fmt::format("wrote {} (OpenVDB level set \"distance\", {} active voxels)", f.out, vdb_->activeVoxels()));
+             fmt::format("wrote {} (OpenVDB level set \"distance\", {} active voxels{})", f.out, vdb_->activeVoxels(),
+                         f.closest == f.out ? fmt::format(", and grid \"closest\" of {} ids", field_.closest_feature)
+                                            : std::string()));
     if (!f.slice_png.empty()) {
       auto acc = grid->getConstAccessor();
       const VoxelSampler sample = [&](const Coord& c) { return acc.getValue(openvdb::Coord(c.x, c.y, c.z)); };
@@ -229,7 +238,7 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
     meta.complete = run.complete;
     meta.segments = segments_;
     meta.complete_up_to_world = up_to;
-    if (!closest_.empty()) {
+    if (plan_.wants_closest()) {
       meta.closest_file = std::filesystem::path(f.closest).filename().string();
       meta.closest_feature = field_.closest_feature;
     }

@@ -12,7 +12,7 @@
 //     nothing of a half-delivered one. Peak memory: the builders plus the open segment's bricks.
 //   * finish() writes every file atomically (a temporary beside the target, renamed over it): the field (.npy or
 //     .vdb), the closest-feature ids (.npy: int32 for triangles and points, int64 for voxels; -1 where nothing
-//     was delivered), the metadata JSON, the slice PNG and the isosurface OBJ. It returns the first error; `lines`
+//     was delivered; or, with --closest naming --out's .vdb, an Int32Grid/Int64Grid "closest" in that file), the metadata JSON, the slice PNG and the isosurface OBJ. It returns the first error; `lines`
 //     gets one "wrote ..." line per file. When the run is incomplete and no --meta was given, the metadata is
 //     written beside the field anyway (FIELD.json): an incomplete field must not pass for a complete one.
 // Not thread-safe: one caller.
@@ -39,7 +39,7 @@ struct OutputFlags {
   std::string out;                      ///< --out FIELD.npy | FIELD.vdb
   std::string npy;                      ///< --npy FIELD.npy (a second, dense copy; may be empty)
   std::string meta;                     ///< --meta FIELD.json
-  std::string closest;                  ///< --closest IDS.npy
+  std::string closest;                  ///< --closest IDS.npy, or --out's FIELD.vdb (a grid beside the distances)
   std::vector<std::string> slice_png;   ///< --slice-png AXIS:INDEX PNG
   std::vector<std::string> isosurface;  ///< --isosurface D OBJ
 };

@@ -19,6 +19,8 @@ struct VdbFieldBuilder::Impl {
   openvdb::FloatGrid::Accessor accessor;
   bool finished = false;
   explicit Impl(openvdb::FloatGrid::Ptr g) : grid(std::move(g)), accessor(grid->getAccessor()) {}
+  openvdb::Int32Grid::Ptr closest32;  // at most one of the two
+  openvdb::Int64Grid::Ptr closest64;
 };
 
 VdbFieldBuilder::VdbFieldBuilder(const Grid& grid, float background) {
@@ -62,9 +64,40 @@ void fillLeaf(Leaf* leaf, const Brick& brick) {
 
 }  // namespace
 
+namespace {
+
+// The brick's closest-feature ids, set active at its masked voxels (touches the tree: one thread).
+template <typename IntGrid>
+void addClosest(IntGrid& grid, const Brick& brick) {
+  if (brick.closest.size() != size_t(kBrickVoxels) || brick.mask.empty()) return;
+  auto* leaf = grid.tree().touchLeaf(openvdb::Coord(brick.origin.x, brick.origin.y, brick.origin.z));
+  for (int w = 0; w < kBrickVoxels / 64; ++w)
+    for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1) {
+      const int v = w * 64 + std::countr_zero(bits);
+      leaf->setValueOn(openvdb::Index(v), typename IntGrid::ValueType(brick.closest[size_t(v)]));
+    }
+}
+
+template <typename IntGrid>
+typename IntGrid::Ptr makeClosestGrid(const openvdb::FloatGrid& distance) {
+  auto g = IntGrid::create(typename IntGrid::ValueType(-1));
+  g->setName("closest");
+  g->setTransform(distance.transform().copy());
+  return g;
+}
+
+}  // namespace
+
+void VdbFieldBuilder::addClosestGrid(bool wide) {
+  if (wide) impl_->closest64 = makeClosestGrid<openvdb::Int64Grid>(*impl_->grid);
+  else impl_->closest32 = makeClosestGrid<openvdb::Int32Grid>(*impl_->grid);
+}
+
 void VdbFieldBuilder::add(const Brick& brick) {
   if (brick.mask.empty()) return;
   fillLeaf(impl_->accessor.touchLeaf(openvdb::Coord(brick.origin.x, brick.origin.y, brick.origin.z)), brick);
+  if (impl_->closest32) addClosest(*impl_->closest32, brick);
+  if (impl_->closest64) addClosest(*impl_->closest64, brick);
 }
 
 void VdbFieldBuilder::add(const SegmentBricks& segment) {
@@ -79,6 +112,10 @@ void VdbFieldBuilder::add(const SegmentBricks& segment) {
     for (size_t i = r.begin(); i != r.end(); ++i)
       if (leaves[i]) fillLeaf(leaves[i], segment.bricks[i]);
   });
+  for (const Brick& b : segment.bricks) {
+    if (impl_->closest32) addClosest(*impl_->closest32, b);
+    if (impl_->closest64) addClosest(*impl_->closest64, b);
+  }
 }
 
 void VdbFieldBuilder::finish() {
@@ -96,7 +133,10 @@ std::string VdbFieldBuilder::write(const std::string& path) {
   const std::string tmp = path + ".tmp";
   try {
     openvdb::io::File file(tmp);
-    file.write({impl_->grid});
+    openvdb::GridPtrVec grids{impl_->grid};
+    if (impl_->closest32) grids.push_back(impl_->closest32);
+    if (impl_->closest64) grids.push_back(impl_->closest64);
+    file.write(grids);
     file.close();
   } catch (const std::exception& e) {
     std::error_code ec;

@@ -26,6 +26,9 @@ class VdbFieldBuilder {
   VdbFieldBuilder(const VdbFieldBuilder&) = delete;
   VdbFieldBuilder& operator=(const VdbFieldBuilder&) = delete;
 
+  /// Also build a grid "closest" of the bricks' closest-feature ids (Brick::closest): an Int32Grid, or an Int64Grid
+  /// when `wide`, background -1, the same transform; write() stores it in the same file. Call before any add().
+  void addClosestGrid(bool wide);
   void add(const Brick& brick);
   void add(const SegmentBricks& segment);
   /// Flood-fills the signs of undelivered voxels; further add() calls are not allowed afterwards.

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
 
 #include "client/cli.h"
 #include "core/io/npy.h"
@@ -359,6 +360,46 @@ TEST(ComputeCommandTest, SharesQuerysOutputsIncludingClosestFeatures) {
   EXPECT_GT(with_id, 1000);
   EXPECT_EQ(wrong, 0);
   for (const std::string& f : {out, ids, png, obj, meta}) std::remove(f.c_str());
+}
+
+}  // namespace
+}  // namespace distband
+
+namespace distband {
+namespace {
+
+// --closest naming --out's .vdb: an Int32Grid "closest" beside the distances, each id the point at the voxel's value.
+TEST(ComputeCommandTest, ClosestGridBesideTheDistancesInTheVdb) {
+  const std::string out = tmp("closest.vdb");
+  const std::vector<Vec3d> points = {{3, 4, 5}, {12.5, 9, 7}, {6, 13, 10}};
+  const CliResult r = run({"compute", "--points", "3,4,5;12.5,9,7;6,13,10", "--dims", "24,20,16", "--limit", "4",
+                           "--out", out, "--closest", out});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("and grid \"closest\" of point ids"), std::string::npos) << r.out;
+  EXPECT_EQ(run({"compute", "--points", "1,1,1", "--dims", "8,8,8", "--limit", "2", "--out", tmp("a.vdb"),
+                 "--closest", tmp("b.vdb")})
+                .code,
+            kExitUsage);
+  openvdb::initialize();
+  openvdb::io::File file(out);
+  file.open();
+  auto distance = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("distance"));
+  auto closest = openvdb::gridPtrCast<openvdb::Int32Grid>(file.readGrid("closest"));
+  file.close();
+  ASSERT_TRUE(distance && closest);
+  EXPECT_EQ(closest->background(), -1);
+  EXPECT_EQ(closest->activeVoxelCount(), distance->activeVoxelCount());
+  auto acc = distance->getConstAccessor();
+  int64_t wrong = 0;
+  for (auto it = closest->cbeginValueOn(); it; ++it) {
+    const openvdb::Coord c = it.getCoord();
+    const Vec3d p = points.at(size_t(*it));
+    const double d = (Vec3d{double(c.x()), double(c.y()), double(c.z())} - p).length();
+    wrong += std::abs(d - acc.getValue(c)) > 1e-5;
+  }
+  EXPECT_GT(closest->activeVoxelCount(), 500u);
+  EXPECT_EQ(wrong, 0);
+  std::remove(out.c_str());
 }
 
 }  // namespace
