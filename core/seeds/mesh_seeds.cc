@@ -65,32 +65,6 @@ SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std
 
 namespace {
 
-// The closest feature of a triangle: its face, one of its edges (e0 = ab, e1 = bc, e2 = ca) or a corner.
-enum class Feature : uint8_t { kFace, kEdge0, kEdge1, kEdge2, kVertex0, kVertex1, kVertex2 };
-
-// Ericson's region tests (RTCD §5.1.5), reporting which region the closest point lies in. Non-degenerate input.
-Vec3d closestWithFeature(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c, Feature* f) {
-  const Vec3d ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return *f = Feature::kVertex0, a;
-  const Vec3d bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return *f = Feature::kVertex1, b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return *f = Feature::kEdge0, a + ab * (d1 / (d1 - d3));
-  const Vec3d cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return *f = Feature::kVertex2, c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return *f = Feature::kEdge2, a + ac * (d2 / (d2 - d6));
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
-    return *f = Feature::kEdge1, b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-  const double denom = 1.0 / (va + vb + vc);
-  *f = Feature::kFace;
-  return a + ab * (vb * denom) + ac * (vc * denom);
-}
-
 Vec3d normalized(const Vec3d& v) {
   const double l = v.length();
   return l > 0 ? v * (1.0 / l) : Vec3d{};
@@ -198,17 +172,17 @@ struct MeshSigner {
     // border, where any consistent pseudonormal agrees with the face normal): no region tests needed.
     const double plane = face_n[t].dot(p - verts[c[0]]);
     if (plane * plane >= dist * dist * (1 - 1e-5)) return plane < 0;
-    Feature f;
-    const Vec3d cp = closestWithFeature(p, verts[c[0]], verts[c[1]], verts[c[2]], &f);
+    TriangleFeature f;
+    const Vec3d cp = closestPointOnTriangle(p, verts[c[0]], verts[c[1]], verts[c[2]], &f);
     Normal3f n;
     switch (f) {
-      case Feature::kFace: n = face_n[t]; break;
-      case Feature::kEdge0: n = edge_n[3 * t + 0]; break;
-      case Feature::kEdge1: n = edge_n[3 * t + 1]; break;
-      case Feature::kEdge2: n = edge_n[3 * t + 2]; break;
-      case Feature::kVertex0: n = vertex_n[corners[t][0]]; break;
-      case Feature::kVertex1: n = vertex_n[corners[t][1]]; break;
-      case Feature::kVertex2: n = vertex_n[corners[t][2]]; break;
+      case TriangleFeature::kFace: n = face_n[t]; break;
+      case TriangleFeature::kEdgeAB: n = edge_n[3 * t + 0]; break;
+      case TriangleFeature::kEdgeBC: n = edge_n[3 * t + 1]; break;
+      case TriangleFeature::kEdgeCA: n = edge_n[3 * t + 2]; break;
+      case TriangleFeature::kVertexA: n = vertex_n[corners[t][0]]; break;
+      case TriangleFeature::kVertexB: n = vertex_n[corners[t][1]]; break;
+      case TriangleFeature::kVertexC: n = vertex_n[corners[t][2]]; break;
     }
     return n.dot(p - cp) < 0;
   }
