@@ -63,8 +63,8 @@ std::vector<float> referenceField(const v1::QueryRequest& request, int threads) 
   if (!resolveQuery(request, options, cache, nullptr, &q).ok()) return {};
   Seeds seeds;
   if (!buildSeeds(q, &seeds).empty()) return {};
-  DenseField field(q.grid, float(q.engine.limit_world));
-  EngineOptions eo = q.engine;
+  DenseField field(q.grid, float(q.plan.limit_world));
+  EngineOptions eo = q.plan.engineOptions();
   eo.threads = threads;
   computeDistanceField(q.grid, std::move(seeds), eo, [&](SegmentBricks&& s) { field.add(s); });
   return std::move(field.values());

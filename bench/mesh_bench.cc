@@ -42,6 +42,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/engine.h"
+#include "core/field_plan.h"
 #include "core/io/vdb_writer.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
@@ -190,28 +191,31 @@ struct DistbandRun {
 };
 
 // One distband run. `consume` sees every segment (inside the timed region).
-// Closed meshes are signed with pseudonormals, open ones (the teapot) with the winding number.
+// Signs, sites and limits as the product decides them (core's planner: auto sign = pseudonormal for closed meshes,
+// the winding number for open ones such as the teapot).
 DistbandRun runDistband(const Grid& grid, const MeshInput& in, MeshSiteMode mode, double limit_vox,
                         double segment_vox, const Options& o, const std::function<void(SegmentBricks&)>& consume) {
   const TriangleMesh& mesh = in.mesh;
   DistbandRun run;
   const auto t0 = Clock::now();
-  MeshSeedOptions so;
-  so.mode = mode;
-  so.sign = in.report.closed() ? SignMethod::kPseudonormal : SignMethod::kWinding;
-  so.limit_voxels = limit_vox;
+  FieldRequest request;
+  request.seeds = SeedKind::kMesh;
+  request.mode = mode == MeshSiteMode::kPaper ? PropagationMode::kPaper : PropagationMode::kExact;
+  if (o.stencil != "auto") request.stencil = *parseStencil(o.stencil);
+  request.limit_voxels = limit_vox;
+  request.segment_length_world = segment_vox * grid.voxelSize();
+  if (o.second_ring) request.second_ring = true;  // otherwise the engine's default for triangle sites (off)
+  FieldPlan plan;
+  if (std::string e = planField(request, grid, &in.report, &plan); !e.empty()) throw std::runtime_error(e);
+  const MeshSeedOptions so = plan.meshSeedOptions(grid);
   Seeds seeds;
   MeshSeedStats stats;
   if (std::string e = makeMeshSeeds(grid, mesh, so, &seeds, &stats); !e.empty()) throw std::runtime_error(e);
   run.seeds_s = since(t0);
   run.band_voxels = stats.band_voxels;
-  EngineOptions eo;
-  eo.mode = mode == MeshSiteMode::kPaper ? PropagationMode::kPaper : o.feature_engine;
-  if (o.stencil != "auto") eo.stencil = *parseStencil(o.stencil);
-  eo.limit_world = limit_vox * grid.voxelSize();
-  eo.segment_length_world = segment_vox * grid.voxelSize();
+  EngineOptions eo = plan.engineOptions();
+  if (mode != MeshSiteMode::kPaper) eo.mode = o.feature_engine;  // the bench's knob for triangle sites
   eo.threads = o.threads;
-  if (o.second_ring) eo.second_ring = true;  // otherwise the engine's default for triangle sites (off), as the product
   double consume_s = 0;
   run.result = computeDistanceField(grid, seeds, eo, [&](SegmentBricks&& s) {
     const auto tc = Clock::now();

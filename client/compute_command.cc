@@ -11,6 +11,7 @@
 
 #include "client/brick_sink.h"
 #include "core/engine.h"
+#include "core/field_plan.h"
 #include "core/io/field_metadata.h"
 #include "core/io/npy.h"
 #include "core/mesh/mesh_grid.h"
@@ -58,58 +59,52 @@ struct SeedInput {
   bool signed_distance = false;
   bool mesh = false;
   std::string description;
-  std::string sign, sign_reason;  ///< meshes: the method in force and why
+  FieldPlan plan;                  ///< every choice made (core's planner), once the grid is known
   GridPadding padding{-1, false};  ///< meshes: the padding used (-1: explicit dims)
   std::string closest_feature;     ///< what a voxel's closest-feature id names
 };
 
-std::string buildMeshInput(const ComputeArgs& a, const Interrupter* interrupter, SeedInput* in) {
+std::string buildMeshInput(const ComputeArgs& a, const FieldRequest& field, const Interrupter* interrupter,
+                           SeedInput* in) {
   if (!a.dims.empty()) return "--dims does not apply to --mesh (use --resolution or --voxel-size)";
   if ((a.resolution_given || a.resolution != 0) && a.resolution < 2)
     return fmt::format("--resolution must be at least 2 voxels (got {})", a.resolution);
   if ((a.resolution > 0) == a.voxel_size_given) return "--mesh needs exactly one of --resolution N or --voxel-size H";
   if (a.padding < -1 || a.padding > kMaxPaddingVoxels)
     return fmt::format("--padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, a.padding);
-  MeshSeedOptions so;
-  SignMethod sign = kDefaultMeshSign;
-  if (!parseSignMethod(a.sign, &sign))
-    return fmt::format("--sign '{}': expected auto, pseudonormal, winding, parity or unsigned", a.sign);
-  const std::string mode = a.mode == "exact" ? "exact-feature" : a.mode;
-  if (!parseMeshSiteMode(mode, &so.mode))
-    return fmt::format("--mode '{}': expected exact-feature (or exact) or paper for a mesh", a.mode);
   TriangleMesh mesh;
   MeshReport report;
   if (std::string e = loadMesh(a.mesh, &mesh, &report); !e.empty()) return e;
-  so.sign = resolveSignMethod(sign, report, &in->sign_reason);
   MeshGridOptions go;
   go.resolution = a.resolution;
   go.voxel_size = a.voxel_size_given ? a.voxel_size : 0;
   if (a.padding >= 0) go.padding_voxels = a.padding;
-  go.limit_world = a.limit;
-  go.limit_voxels = a.limit_voxels;
+  go.limit_world = field.limit_world;
+  go.limit_voxels = field.limit_voxels;
   if (std::string e = gridForMesh(mesh, go, &in->grid, &in->padding); !e.empty()) return e;
-  so.limit_voxels = a.limit_voxels > 0 ? a.limit_voxels : a.limit / in->grid.voxelSize();
+  if (std::string e = planField(field, in->grid, &report, &in->plan); !e.empty()) return e;
+  MeshSeedOptions so = in->plan.meshSeedOptions(in->grid);
   so.interrupter = interrupter;
   if (std::string e = makeMeshSeeds(in->grid, mesh, so, &in->seeds); !e.empty()) return fmt::format("{}: {}", a.mesh, e);
-  in->signed_distance = so.sign != SignMethod::kUnsigned;
+  in->signed_distance = in->plan.signedField();
   in->mesh = true;
-  in->sign = std::string(signMethodName(so.sign));
   in->closest_feature = "triangle";
   const Coord d = in->grid.dims();
   in->description = fmt::format("mesh {} ({}; grid {}x{}x{}, padding {}, sites {}, sign {} ({}))", a.mesh,
                                 report.summary(), d.x, d.y, d.z, in->padding.voxels, meshSiteModeName(so.mode),
-                                in->sign, in->sign_reason);
+                                in->plan.signName(), in->plan.sign_reason);
   return {};
 }
 
-std::string buildSeedInput(const ComputeArgs& a, const Interrupter* interrupter, SeedInput* in) {
+std::string buildSeedInput(const ComputeArgs& a, const FieldRequest& field, const Interrupter* interrupter,
+                           SeedInput* in) {
   const int sources = int(!a.volume.empty()) + int(!a.points.empty()) + int(!a.mesh.empty());
   if (sources != 1)
     return "give exactly one seed source: --volume MASK.npy, --points \"x,y,z;...\" or --mesh FILE";
   if (a.signed_distance && a.volume.empty()) return "--signed needs --volume (meshes take --sign)";
   if (!(std::isfinite(a.voxel_size) && a.voxel_size > 0))
     return fmt::format("--voxel-size must be finite and > 0 (got {})", a.voxel_size);
-  if (!a.mesh.empty()) return buildMeshInput(a, interrupter, in);
+  if (!a.mesh.empty()) return buildMeshInput(a, field, interrupter, in);
   if (a.resolution != 0) return "--resolution applies to --mesh only";
   in->signed_distance = a.signed_distance;
   Vec3d origin;
@@ -128,7 +123,8 @@ std::string buildSeedInput(const ComputeArgs& a, const Interrupter* interrupter,
                          a.volume, mask_dims.z, mask_dims.y, mask_dims.x);
     in->grid = Grid(origin, voxel_size, mask_dims);
     if (std::string e = in->grid.validate(); !e.empty()) return e;
-    if (std::string e = makeVolumeSeeds(in->grid, *mask, a.signed_distance, &in->seeds, interrupter); !e.empty())
+    if (std::string e = planField(field, in->grid, nullptr, &in->plan); !e.empty()) return e;
+    if (std::string e = makeVolumeSeeds(in->grid, *mask, in->plan.inside_negative, &in->seeds, interrupter); !e.empty())
       return fmt::format("{}: {}", a.volume, e);
     in->mask = mask;
     in->closest_feature = "voxel";
@@ -141,6 +137,7 @@ std::string buildSeedInput(const ComputeArgs& a, const Interrupter* interrupter,
   if (std::string e = parsePointList(a.points, &points); !e.empty()) return e;
   in->grid = Grid(origin, voxel_size, dims);
   if (std::string e = in->grid.validate(); !e.empty()) return e;
+  if (std::string e = planField(field, in->grid, nullptr, &in->plan); !e.empty()) return e;
   if (std::string e = makePointSeeds(in->grid, points, &in->seeds); !e.empty()) return "--points: " + e;
   in->closest_feature = "point";
   in->description = fmt::format("{} point{} in {}x{}x{}", points.size(), points.size() == 1 ? "" : "s", dims.x,
@@ -203,30 +200,42 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
     return kExitUsage;
   };
 
-  EngineOptions options;
+  // What the flags ask for; core's planner (planField) makes every choice left open, once the grid is known.
+  FieldRequest field;
+  field.seeds = !a.mesh.empty() ? SeedKind::kMesh : !a.volume.empty() ? SeedKind::kVolume : SeedKind::kPoints;
   if (a.stencil != "auto") {
-    const std::optional<StencilKind> stencil = parseStencil(a.stencil);
-    if (!stencil)
+    field.stencil = parseStencil(a.stencil);
+    if (!field.stencil)
       return usage(fmt::format("--stencil '{}': expected auto, cubic26, cubic18, cubic6 or fcc12", a.stencil));
-    options.stencil = *stencil;
   }
-  if (a.mesh.empty() && !parseMode(a.mode, &options.mode))
-    return usage(fmt::format("--mode '{}': expected exact or paper", a.mode));
-  // Meshes: exact-feature propagates closest triangles to convergence; paper propagates closest points with the
-  // paper's lifespan band. The second-ring correction costs several times the propagation on triangle sites for
-  // ~0.01 voxel, so it is opt-in (--second-ring).
-  if (!a.mesh.empty()) {
-    options.mode = a.mode == "paper" ? PropagationMode::kPaper : PropagationMode::kExact;
-    if (a.second_ring) options.second_ring = true;  // otherwise the engine's default for triangle sites: off
+  // Meshes: exact-feature (alias exact) propagates closest triangles to convergence; paper propagates closest points
+  // with the paper's lifespan band.
+  PropagationMode mode;
+  if (field.seeds == SeedKind::kMesh && a.mode == "exact-feature") mode = PropagationMode::kExact;
+  else if (!parseMode(a.mode, &mode))
+    return usage(field.seeds == SeedKind::kMesh
+                     ? fmt::format("--mode '{}': expected exact-feature (or exact) or paper for a mesh", a.mode)
+                     : fmt::format("--mode '{}': expected exact or paper", a.mode));
+  field.mode = mode;
+  if (field.seeds == SeedKind::kMesh) {
+    SignMethod sign;
+    if (!parseSignMethod(a.sign, &sign))
+      return usage(fmt::format("--sign '{}': expected auto, pseudonormal, winding, parity or unsigned", a.sign));
+    field.mesh_sign = sign;
+    // The second-ring correction costs several times the propagation on triangle sites for ~0.01 voxel: opt-in.
+    if (a.second_ring) field.second_ring = true;
   }
-  options.segment_length_world = a.segment;
-  options.threads = a.threads;
+  field.inside_negative = a.signed_distance;
   if (std::isnan(a.limit) || a.limit <= 0) return usage(fmt::format("--limit must be > 0 (got {})", a.limit));
   if (a.limit_voxels != 0 && !(a.limit_voxels > 0 && std::isfinite(a.limit_voxels)))
     return usage(fmt::format("--limit-voxels must be finite and > 0 (got {})", a.limit_voxels));
   if (!(a.segment >= 0) || std::isinf(a.segment))
     return usage(fmt::format("--segment must be finite and >= 0 (got {})", a.segment));
   if (a.threads < 0) return usage(fmt::format("--threads must be >= 0 (got {})", a.threads));
+  field.limit_world = a.limit;
+  field.limit_voxels = a.limit_voxels;
+  field.segment_length_world = a.segment;
+  field.closest_features = !a.outputs.closest.empty();
 
   OutputPlan plan;
   const double limit_flag = a.limit_voxels > 0 ? std::numeric_limits<double>::quiet_NaN() : a.limit;
@@ -234,17 +243,16 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
 
   InterruptWatch watch(ctx.interrupted);
   SeedInput in;
-  if (std::string e = buildSeedInput(a, &watch.interrupter(), &in); !e.empty()) {
+  if (std::string e = buildSeedInput(a, field, &watch.interrupter(), &in); !e.empty()) {
     if (watch.interrupter().interrupted()) {
       ctx.err << "distband compute: interrupted; nothing written\n";
       return kExitInterrupted;
     }
     return usage(e);
   }
-  // The limit in force, in world units (--limit-voxels needs the grid's voxel size).
-  const double limit = a.limit_voxels > 0 ? a.limit_voxels * in.grid.voxelSize() : a.limit;
-  options.limit_world = limit;
-  options.closest_features = plan.wants_closest();
+  const double limit = in.plan.limit_world;  // world units, whichever unit the flag used
+  EngineOptions options = in.plan.engineOptions();
+  options.threads = a.threads;
   if (std::string e = validateOptions(in.grid, options); !e.empty()) return usage(e);
   if (in.padding.band_clipped)
     ctx.err << fmt::format("distband compute: warning: the band is clipped at the grid's faces: padding {} voxels < "
@@ -252,24 +260,24 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
                            in.padding.voxels, limit / in.grid.voxelSize(),
                            a.padding >= 0 ? " (--padding)" : "; give a larger --resolution or --padding");
 
-  const StencilKind stencil = options.stencil.value_or(defaultStencil(in.seeds.kind));
-  FieldDescription field;
-  field.grid = in.grid;
-  field.limit_world = limit;
-  field.signed_distance = in.signed_distance;
-  field.inside = in.mask;
-  field.sign_from_band = in.mesh && in.signed_distance;
-  field.stencil = std::string(stencilName(stencil));
-  field.mode = std::string(modeName(options.mode));
-  if (in.signed_distance) field.sign = in.mesh ? in.sign : "mask-inside";
-  field.sign_reason = in.sign_reason;
-  field.padding_voxels = in.padding.voxels;
-  field.band_clipped = in.padding.band_clipped;
-  field.segment_length_world = a.segment;
-  field.closest_feature = in.closest_feature;
-  field.title = std::filesystem::path(!a.mesh.empty() ? a.mesh : a.volume).filename().string();
+  const StencilKind stencil = in.plan.stencil;
+  FieldDescription description;
+  description.grid = in.grid;
+  description.limit_world = limit;
+  description.signed_distance = in.signed_distance;
+  description.inside = in.mask;
+  description.sign_from_band = in.mesh && in.signed_distance;
+  description.stencil = std::string(stencilName(stencil));
+  description.mode = std::string(modeName(options.mode));
+  if (in.signed_distance) description.sign = std::string(in.plan.signName());
+  description.sign_reason = in.plan.sign_reason;
+  description.padding_voxels = in.padding.voxels;
+  description.band_clipped = in.padding.band_clipped;
+  description.segment_length_world = a.segment;
+  description.closest_feature = in.closest_feature;
+  description.title = std::filesystem::path(!a.mesh.empty() ? a.mesh : a.volume).filename().string();
   FieldOutputs outputs(plan);
-  if (std::string e = outputs.open(field); !e.empty()) return usage(e);
+  if (std::string e = outputs.open(description); !e.empty()) return usage(e);
 
   ctx.out << fmt::format("distband compute: {}, voxel size {:g}, stencil {}, mode {}, segment {}, limit {}, threads {}\n",
                          in.description, in.grid.voxelSize(), stencilName(stencil), modeName(options.mode),

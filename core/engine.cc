@@ -1,8 +1,9 @@
 // The active-band engine. See engine.h for the contract and docs/algorithm.md for the method.
 //
-// Per voxel the band stores one 64-bit key = (float squared distance in voxels) << 32 | site id. Positive floats
-// order like their bit patterns, so "better site" is an integer minimum and one atomic CAS updates distance and
-// site together; ties go to the lower site id, which keeps the result independent of thread scheduling.
+// Per voxel the band stores one 64-bit key = (float squared distance in voxels) << 32 | site id (27 bits) << 5 |
+// the stencil link the site arrived by (5 bits; see kSiteBits below). Positive floats order like their bit patterns,
+// so "better site" is an integer minimum and one atomic CAS updates distance, site and link together; ties go to the
+// lower site id, which keeps the result independent of thread scheduling.
 //
 // A step is Jacobi-like: every voxel that changed in the previous step offers the site it held at the end of that
 // step (snapshotted in the front list) to its stencil neighbours; neighbours keep the minimum. Pushes from voxels

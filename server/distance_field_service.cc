@@ -437,8 +437,8 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
     label += fmt::format(" tile window={}x{}x{}@{},{},{}", q.tile->window.dims.x, q.tile->window.dims.y,
                          q.tile->window.dims.z, q.tile->window.min.x, q.tile->window.min.y, q.tile->window.min.z);
   grid = q.grid;
-  limit = q.engine.limit_world;
-  segment = q.engine.segment_length_world;
+  limit = q.plan.limit_world;
+  segment = q.plan.segment_length_world;
 
   // Admission: the estimated peak (seeds, engine, one output chunk, the stream buffer) and a compute slot.
   // A coordinator computes nothing itself: it holds its stream buffer and the later segments it may buffer.

@@ -57,7 +57,7 @@ void QueryJob::run() {
         status_ = Status::Internal("seeds: " + e);
         return;
       }
-      EngineOptions options = query_.engine;
+      EngineOptions options = query_.plan.engineOptions();
       options.threads = 0;  // the shared arena we are executing in
       options.interrupter = interrupter_;
       options.max_chunk_bricks = kQueryChunkBricks;

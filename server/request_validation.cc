@@ -32,14 +32,14 @@ Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, Ass
         return Status::NotFound(
             fmt::format("asset_id: no asset '{}' in the cache (never uploaded, or evicted: upload it again)",
                         r.asset_id()));
-      q->seed_kind = q->asset->kind == Asset::Kind::kMesh ? ResolvedQuery::SeedKind::kMesh
-                                                           : ResolvedQuery::SeedKind::kVolume;
+      q->seed_kind = q->asset->kind == Asset::Kind::kMesh ? SeedKind::kMesh
+                                                           : SeedKind::kVolume;
       q->seeds_label = q->asset->id.substr(0, std::min<size_t>(q->asset->id.size(), 17)) +
                        (q->asset->name.empty() ? "" : "(" + q->asset->name + ")");
       return Status::Ok();
     }
     case v1::QueryRequest::kMesh: {
-      q->seed_kind = ResolvedQuery::SeedKind::kMesh;
+      q->seed_kind = SeedKind::kMesh;
       q->seeds_label = fmt::format("inline-mesh({} bytes)", r.mesh().data().size());
       if (!inline_mesh) return Status::Internal("the inline mesh was not parsed before the query was resolved");
       q->asset = std::move(inline_mesh);
@@ -57,12 +57,12 @@ Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, Ass
                                      pts[i].x(), pts[i].y(), pts[i].z()));
         q->points.push_back(toVec(pts[i]));
       }
-      q->seed_kind = ResolvedQuery::SeedKind::kPoints;
+      q->seed_kind = SeedKind::kPoints;
       q->seeds_label = fmt::format("points({})", pts.size());
       return Status::Ok();
     }
     case v1::QueryRequest::kVolume: {
-      q->seed_kind = ResolvedQuery::SeedKind::kVolume;
+      q->seed_kind = SeedKind::kVolume;
       q->seeds_label = fmt::format("inline-volume({}x{}x{})", r.volume().dims().x(), r.volume().dims().y(),
                                    r.volume().dims().z());
       return parseVolumeAsset(r.volume().dims(), r.volume().mask(), "inline volume", "volume",
@@ -74,8 +74,8 @@ Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, Ass
 }
 
 // A volume covers the whole grid, or a tile's window only (then its dims are the window's and the grid needs dims).
-// `limit_voxels` > 0: the request's limit in voxels, else q.engine.limit_world holds it (for the default padding).
-Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, double limit_voxels, Grid* grid,
+// `field` carries the limit (for the default padding).
+Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, const FieldRequest& field, Grid* grid,
                    GridPadding* padding) {
   if (g.voxel_size() != 0 && !(std::isfinite(g.voxel_size()) && g.voxel_size() > 0))
     return invalid(fmt::format("grid.voxel_size must be finite and > 0 when set (got {})", g.voxel_size()));
@@ -85,7 +85,7 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, dou
     return invalid(fmt::format("grid.padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, g.padding()));
   if (g.has_origin() && !finite(g.origin()))
     return invalid("grid.origin must have finite coordinates");
-  const bool volume = q.seed_kind == ResolvedQuery::SeedKind::kVolume;
+  const bool volume = q.seed_kind == SeedKind::kVolume;
   if (volume && tile && !g.has_dims())
     return invalid("grid.dims must be set for a tile of volume seeds (the volume covers only the tile's window)");
 
@@ -119,8 +119,8 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, dou
   mo.voxel_size = g.voxel_size();
   mo.resolution = int(g.resolution());
   if (g.has_padding()) mo.padding_voxels = int(g.padding());
-  mo.limit_world = q.engine.limit_world;
-  mo.limit_voxels = limit_voxels;
+  mo.limit_world = field.limit_world;
+  mo.limit_voxels = field.limit_voxels;
   TriangleMesh point_bounds;  // gridForMesh reads only the vertices' bounds
   const TriangleMesh* bounds = &point_bounds;
   if (g.has_box()) {  // way b
@@ -130,7 +130,7 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, dou
     const Vec3d lo = *mo.box_min, hi = *mo.box_max;
     if (!(hi.x >= lo.x && hi.y >= lo.y && hi.z >= lo.z)) return invalid("grid.box.max must be >= grid.box.min");
   } else {  // way c
-    if (q.seed_kind == ResolvedQuery::SeedKind::kMesh) {
+    if (q.seed_kind == SeedKind::kMesh) {
       bounds = q.asset->mesh.get();
     } else {
       point_bounds.vertices = q.points;
@@ -164,7 +164,7 @@ Status resolveTile(const v1::Tile& t, const Grid& grid, ResolvedQuery* q) {
   if (Status s = resolveBox(t.window(), grid, "tile.window", &tile.window); !s.ok()) return s;
   if (Status s = resolveBox(t.deliver(), grid, "tile.deliver", &tile.deliver); !s.ok()) return s;
   if (!tile.window.contains(tile.deliver)) return invalid("tile.deliver must lie inside tile.window");
-  if (q->seed_kind == ResolvedQuery::SeedKind::kVolume && !(q->asset->dims == tile.window.dims))
+  if (q->seed_kind == SeedKind::kVolume && !(q->asset->dims == tile.window.dims))
     return invalid(fmt::format("volume: a tile's volume covers its window: dims must be {}x{}x{} (got {}x{}x{})",
                                tile.window.dims.x, tile.window.dims.y, tile.window.dims.z, q->asset->dims.x,
                                q->asset->dims.y, q->asset->dims.z));
@@ -188,13 +188,13 @@ Status checkSites(const ResolvedQuery& q) {
   uint64_t sites = 0;
   std::string what;
   switch (q.seed_kind) {
-    case ResolvedQuery::SeedKind::kPoints: return Status::Ok();  // bounded by kMaxPoints
-    case ResolvedQuery::SeedKind::kVolume:
+    case SeedKind::kPoints: return Status::Ok();  // bounded by kMaxPoints
+    case SeedKind::kVolume:
       sites = q.asset->footprint->boundary_voxels;
       what = "volume: the mask has {} boundary voxels (each one a site)";
       break;
-    case ResolvedQuery::SeedKind::kMesh:
-      if (q.engine.mode == PropagationMode::kPaper) {
+    case SeedKind::kMesh:
+      if (q.plan.mode == PropagationMode::kPaper) {
         sites = meshBandVoxelEstimate(meshAreaVoxels(*q.asset->mesh, q.grid.voxelSize()), 0, UINT64_MAX);
         what = "mesh: paper mode makes a site of every initial band voxel, about {} here";
       } else {
@@ -206,39 +206,39 @@ Status checkSites(const ResolvedQuery& q) {
   if (sites <= kMaxEngineSites) return Status::Ok();
   return Status::ResourceExhausted(fmt::format(fmt::runtime(what), sites) +
                                    fmt::format(", more than the engine's {} sites; use a coarser grid{}", kMaxEngineSites,
-                                               q.seed_kind == ResolvedQuery::SeedKind::kMesh ? " or exact mode" : ""));
+                                               q.seed_kind == SeedKind::kMesh ? " or exact mode" : ""));
 }
 
 // The touched-voxel bound of the seeds within the limit, and the peak bytes the query is admitted with.
 void estimateMemory(ResolvedQuery* q) {
   const Grid grid = q->engineGrid();
-  const double limit_voxels = q->engine.limit_world / grid.voxelSize();
+  const double limit_voxels = q->plan.limitVoxels(grid);
   BandExtent extent(grid, limit_voxels);
   FieldMemoryInput in;
-  in.mode = q->engine.mode;
+  in.mode = q->plan.mode;
   in.grid_voxels = uint64_t(grid.voxelCount());
   in.chunk_bricks = kQueryChunkBricks;
-  in.closest_features = q->engine.closest_features;
+  in.closest_features = q->plan.closest_features;
   switch (q->seed_kind) {
-    case ResolvedQuery::SeedKind::kPoints:
+    case SeedKind::kPoints:
       in.seed_kind = FieldMemoryInput::SeedKind::kPoints;
       in.points = q->points.size();
       for (const Vec3d& p : q->points) extent.addPoint(grid.indexOf(p));
       break;
-    case ResolvedQuery::SeedKind::kVolume:
+    case SeedKind::kVolume:
       in.seed_kind = FieldMemoryInput::SeedKind::kVolume;
-      in.signed_volume = q->sign == v1::SIGN_MODE_MASK_INSIDE;
+      in.signed_volume = q->plan.inside_negative;
       in.volume_seed_voxels = q->asset->footprint->seed_voxels;
       in.volume_boundary_voxels = q->asset->footprint->boundary_voxels;
       addVolume(*q->asset->footprint, in.signed_volume, &extent);
       break;
-    case ResolvedQuery::SeedKind::kMesh: {
+    case SeedKind::kMesh: {
       in.seed_kind = FieldMemoryInput::SeedKind::kMesh;
       const TriangleMesh& mesh = *q->asset->mesh;
       in.mesh_vertices = mesh.vertices.size();
       in.mesh_triangles = mesh.triangles.size();
       in.mesh_area_voxels = meshAreaVoxels(mesh, grid.voxelSize());
-      in.mesh_sign = q->mesh_sign;
+      in.mesh_sign = q->plan.mesh_sign;
       if (!extent.wholeGrid())
         for (const auto& t : mesh.triangles) {
           const Vec3d a = grid.indexOf(mesh.vertices[t[0]]), b = grid.indexOf(mesh.vertices[t[1]]),
@@ -257,11 +257,11 @@ void estimateMemory(ResolvedQuery* q) {
   if (std::isfinite(limit_voxels)) {
     const double l = limit_voxels;
     switch (q->seed_kind) {
-      case ResolvedQuery::SeedKind::kPoints: expected = double(q->points.size()) * 4.18879 * l * l * l; break;
-      case ResolvedQuery::SeedKind::kVolume:
+      case SeedKind::kPoints: expected = double(q->points.size()) * 4.18879 * l * l * l; break;
+      case SeedKind::kVolume:
         expected = double(in.volume_seed_voxels) + double(in.volume_boundary_voxels) * l * (in.signed_volume ? 2 : 1);
         break;
-      case ResolvedQuery::SeedKind::kMesh: expected = in.mesh_area_voxels * 2 * l; break;
+      case SeedKind::kMesh: expected = in.mesh_area_voxels * 2 * l; break;
     }
   }
   q->expected_voxels = uint64_t(std::min(expected, double(q->touched_voxels_bound)));
@@ -275,30 +275,23 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
   ResolvedQuery q;
   if (Status s = resolveSeeds(r, options, cache, std::move(inline_mesh), &q); !s.ok()) return s;
 
-  // Enumerations (proto3 enums are open: unknown numbers must be rejected, not cast).
+  // Enumerations (proto3 enums are open: unknown numbers must be rejected, not cast). What is left unset is decided
+  // by core's planner (planField) below, as for every other caller.
+  FieldRequest fr;
+  fr.seeds = q.seed_kind;
   switch (r.stencil()) {
-    case v1::STENCIL_UNSPECIFIED: break;  // the engine's default for the site kind, resolved below
-    case v1::STENCIL_CUBIC26: q.engine.stencil = StencilKind::kCubic26; break;
-    case v1::STENCIL_CUBIC6: q.engine.stencil = StencilKind::kCubic6; break;
-    case v1::STENCIL_CUBIC18: q.engine.stencil = StencilKind::kCubic18; break;
-    case v1::STENCIL_FCC12: q.engine.stencil = StencilKind::kFcc12; break;
+    case v1::STENCIL_UNSPECIFIED: break;
+    case v1::STENCIL_CUBIC26: fr.stencil = StencilKind::kCubic26; break;
+    case v1::STENCIL_CUBIC6: fr.stencil = StencilKind::kCubic6; break;
+    case v1::STENCIL_CUBIC18: fr.stencil = StencilKind::kCubic18; break;
+    case v1::STENCIL_FCC12: fr.stencil = StencilKind::kFcc12; break;
     default: return invalid(fmt::format("stencil must be a Stencil value 0..4 (got {})", int(r.stencil())));
   }
   switch (r.mode()) {
-    case v1::PROPAGATION_MODE_UNSPECIFIED:
-    case v1::PROPAGATION_MODE_EXACT: q.mode = v1::PROPAGATION_MODE_EXACT; q.engine.mode = PropagationMode::kExact; break;
-    case v1::PROPAGATION_MODE_PAPER: q.mode = r.mode(); q.engine.mode = PropagationMode::kPaper; break;
+    case v1::PROPAGATION_MODE_UNSPECIFIED: break;
+    case v1::PROPAGATION_MODE_EXACT: fr.mode = PropagationMode::kExact; break;
+    case v1::PROPAGATION_MODE_PAPER: fr.mode = PropagationMode::kPaper; break;
     default: return invalid(fmt::format("mode must be a PropagationMode value 0..2 (got {})", int(r.mode())));
-  }
-  // Meshes in exact mode propagate triangle sites; paper mode and the other seeds propagate points.
-  const SiteKind sites = q.seed_kind == ResolvedQuery::SeedKind::kMesh && q.engine.mode == PropagationMode::kExact
-                             ? SiteKind::kTriangle
-                             : SiteKind::kPoint;
-  switch (q.engine.stencil.value_or(defaultStencil(sites))) {
-    case StencilKind::kCubic6: q.stencil = v1::STENCIL_CUBIC6; break;
-    case StencilKind::kCubic18: q.stencil = v1::STENCIL_CUBIC18; break;
-    case StencilKind::kCubic26: q.stencil = v1::STENCIL_CUBIC26; break;
-    case StencilKind::kFcc12: q.stencil = v1::STENCIL_FCC12; break;
   }
   switch (r.encoding()) {
     case v1::BRICK_ENCODING_UNSPECIFIED:
@@ -309,43 +302,32 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
   const v1::SignMode sign = r.sign();
   if (sign < v1::SIGN_MODE_UNSPECIFIED || sign > v1::SIGN_MODE_AUTO)
     return invalid(fmt::format("sign must be a SignMode value 0..6 (got {})", int(sign)));
-  // UNSPECIFIED and AUTO are the seeds' default: core's for meshes (resolved on the mesh), unsigned otherwise.
+  // UNSPECIFIED and AUTO leave the sign to the planner (meshes: auto; points and volumes: unsigned).
   const bool default_sign = sign == v1::SIGN_MODE_UNSPECIFIED || sign == v1::SIGN_MODE_AUTO;
-  q.sign_reason = default_sign ? "default" : "requested";
   switch (q.seed_kind) {
-    case ResolvedQuery::SeedKind::kPoints:
+    case SeedKind::kPoints:
       if (!default_sign && sign != v1::SIGN_MODE_UNSIGNED)
         return invalid(fmt::format("sign: point seeds only support SIGN_MODE_UNSIGNED (got {})",
                                    v1::SignMode_Name(sign)));
-      q.sign = v1::SIGN_MODE_UNSIGNED;
       break;
-    case ResolvedQuery::SeedKind::kVolume:
+    case SeedKind::kVolume:
       if (!default_sign && sign != v1::SIGN_MODE_UNSIGNED && sign != v1::SIGN_MODE_MASK_INSIDE)
         return invalid(fmt::format("sign: volume seeds support SIGN_MODE_UNSIGNED or SIGN_MODE_MASK_INSIDE (got {})",
                                    v1::SignMode_Name(sign)));
-      q.sign = default_sign ? v1::SIGN_MODE_UNSIGNED : sign;
+      fr.inside_negative = sign == v1::SIGN_MODE_MASK_INSIDE;
       break;
-    case ResolvedQuery::SeedKind::kMesh: {
-      SignMethod method = kDefaultMeshSign;
+    case SeedKind::kMesh:
       switch (sign) {
-        case v1::SIGN_MODE_UNSIGNED: method = SignMethod::kUnsigned; break;
-        case v1::SIGN_MODE_PSEUDONORMAL: method = SignMethod::kPseudonormal; break;
-        case v1::SIGN_MODE_WINDING: method = SignMethod::kWinding; break;
-        case v1::SIGN_MODE_PARITY: method = SignMethod::kParity; break;
+        case v1::SIGN_MODE_UNSIGNED: fr.mesh_sign = SignMethod::kUnsigned; break;
+        case v1::SIGN_MODE_PSEUDONORMAL: fr.mesh_sign = SignMethod::kPseudonormal; break;
+        case v1::SIGN_MODE_WINDING: fr.mesh_sign = SignMethod::kWinding; break;
+        case v1::SIGN_MODE_PARITY: fr.mesh_sign = SignMethod::kParity; break;
         case v1::SIGN_MODE_MASK_INSIDE:
           return invalid("sign: SIGN_MODE_MASK_INSIDE is for volume seeds; meshes take AUTO, UNSIGNED, PSEUDONORMAL, "
                          "WINDING or PARITY");
         default: break;
       }
-      q.mesh_sign = resolveSignMethod(method, q.asset->mesh_report, &q.sign_reason);
-      switch (q.mesh_sign) {
-        case SignMethod::kUnsigned: q.sign = v1::SIGN_MODE_UNSIGNED; break;
-        case SignMethod::kWinding: q.sign = v1::SIGN_MODE_WINDING; break;
-        case SignMethod::kParity: q.sign = v1::SIGN_MODE_PARITY; break;
-        default: q.sign = v1::SIGN_MODE_PSEUDONORMAL; break;
-      }
       break;
-    }
   }
 
   if (!(r.segment_length() >= 0) || !std::isfinite(r.segment_length()))
@@ -356,24 +338,27 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
     return invalid(fmt::format("limit_voxels must be finite and > 0 when set (got {})", r.limit_voxels()));
   if (r.limit_voxels() != 0 && r.limit() != 0)
     return invalid("limit and limit_voxels are mutually exclusive: give the limit in world units or in voxels");
+  fr.limit_world = r.limit() == 0 ? std::numeric_limits<double>::infinity() : r.limit();
+  fr.limit_voxels = r.limit_voxels();
+  fr.segment_length_world = r.segment_length();
+  fr.closest_features = r.closest_feature();
   if (r.closest_feature()) {
-    q.engine.closest_features = true;
     switch (q.seed_kind) {
-      case ResolvedQuery::SeedKind::kPoints: q.closest = v1::CLOSEST_FEATURE_POINT; break;
-      case ResolvedQuery::SeedKind::kVolume: q.closest = v1::CLOSEST_FEATURE_VOXEL; break;
-      case ResolvedQuery::SeedKind::kMesh: q.closest = v1::CLOSEST_FEATURE_TRIANGLE; break;
+      case SeedKind::kPoints: q.closest = v1::CLOSEST_FEATURE_POINT; break;
+      case SeedKind::kVolume: q.closest = v1::CLOSEST_FEATURE_VOXEL; break;
+      case SeedKind::kMesh: q.closest = v1::CLOSEST_FEATURE_TRIANGLE; break;
     }
   }
-  q.engine.segment_length_world = r.segment_length();
-  q.engine.limit_world = r.limit() == 0 ? std::numeric_limits<double>::infinity() : r.limit();
 
   q.batch_bytes = r.max_batch_bytes() == 0
                       ? options.batch_bytes
                       : std::clamp<uint32_t>(r.max_batch_bytes(), 64u << 10, options.max_message_bytes);
 
   if (!r.has_grid()) return invalid("grid must be set (voxel_size or resolution, or dims)");
-  if (Status s = resolveGrid(r.grid(), q, r.has_tile(), r.limit_voxels(), &q.grid, &q.padding); !s.ok()) return s;
-  if (r.limit_voxels() != 0) q.engine.limit_world = r.limit_voxels() * q.grid.voxelSize();
+  if (Status s = resolveGrid(r.grid(), q, r.has_tile(), fr, &q.grid, &q.padding); !s.ok()) return s;
+  if (std::string e = planField(fr, q.grid, q.seed_kind == SeedKind::kMesh ? &q.asset->mesh_report : nullptr, &q.plan);
+      !e.empty())
+    return invalid(e);
   if (r.has_tile())
     if (Status s = resolveTile(r.tile(), q.grid, &q); !s.ok()) return s;
   // The budget bounds the work: the voxels computed (a tile's window, not the whole grid it belongs to).
@@ -384,17 +369,17 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
         fmt::format("{}: {}x{}x{} = {} voxels exceeds the server's voxel budget of {} per query",
                     q.tile ? "tile.window" : "grid", computed.dims().x, computed.dims().y, computed.dims().z, voxels,
                     options.max_voxels_per_query));
-  if (std::string e = validateOptions(q.engineGrid(), q.engine); !e.empty()) return invalid(e);
+  if (std::string e = validateOptions(q.engineGrid(), q.plan.engineOptions()); !e.empty()) return invalid(e);
   // Without a limit the engine's own segment-count rule does not apply: bound it by the grid's diagonal, the
   // largest distance a voxel can have, so a tiny segment length cannot request millions of empty segments.
-  if (q.engine.segment_length_world > 0) {
+  if (q.plan.segment_length_world > 0) {
     const Coord d = q.grid.dims();
     const double diagonal = q.grid.voxelSize() * std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z);
-    const double span = std::min(q.engine.limit_world, diagonal);
-    if (span / q.engine.segment_length_world > kMaxSegments)
+    const double span = std::min(q.plan.limit_world, diagonal);
+    if (span / q.plan.segment_length_world > kMaxSegments)
       return invalid(fmt::format("segment_length {} would cut min(limit, grid diagonal) = {} into more than {} "
                                  "segments; use a longer segment_length",
-                                 q.engine.segment_length_world, span, kMaxSegments));
+                                 q.plan.segment_length_world, span, kMaxSegments));
   }
   if (Status s = checkSites(q); !s.ok()) return s;
   estimateMemory(&q);
@@ -414,6 +399,30 @@ Status checkInlineMesh(const v1::QueryRequest& r, const ServerOptions& options) 
   return Status::Ok();
 }
 
+v1::SignMode signOf(const FieldPlan& plan) {
+  if (plan.seeds == SeedKind::kVolume) return plan.inside_negative ? v1::SIGN_MODE_MASK_INSIDE : v1::SIGN_MODE_UNSIGNED;
+  if (plan.seeds == SeedKind::kPoints) return v1::SIGN_MODE_UNSIGNED;
+  switch (plan.mesh_sign) {
+    case SignMethod::kPseudonormal: return v1::SIGN_MODE_PSEUDONORMAL;
+    case SignMethod::kWinding: return v1::SIGN_MODE_WINDING;
+    case SignMethod::kParity: return v1::SIGN_MODE_PARITY;
+    default: return v1::SIGN_MODE_UNSIGNED;
+  }
+}
+
+v1::Stencil stencilOf(const FieldPlan& plan) {
+  switch (plan.stencil) {
+    case StencilKind::kCubic6: return v1::STENCIL_CUBIC6;
+    case StencilKind::kCubic18: return v1::STENCIL_CUBIC18;
+    case StencilKind::kFcc12: return v1::STENCIL_FCC12;
+    default: return v1::STENCIL_CUBIC26;
+  }
+}
+
+v1::PropagationMode modeOf(const FieldPlan& plan) {
+  return plan.mode == PropagationMode::kPaper ? v1::PROPAGATION_MODE_PAPER : v1::PROPAGATION_MODE_EXACT;
+}
+
 void fillQueryHeader(const ResolvedQuery& q, const std::string& query_id, v1::QueryHeader* h) {
   h->mutable_origin()->set_x(q.grid.origin().x);
   h->mutable_origin()->set_y(q.grid.origin().y);
@@ -422,15 +431,15 @@ void fillQueryHeader(const ResolvedQuery& q, const std::string& query_id, v1::Qu
   h->mutable_dims()->set_x(q.grid.dims().x);
   h->mutable_dims()->set_y(q.grid.dims().y);
   h->mutable_dims()->set_z(q.grid.dims().z);
-  h->set_limit(q.engine.limit_world);
-  h->set_signed_(q.signedField());
+  h->set_limit(q.plan.limit_world);
+  h->set_signed_(q.plan.signedField());
   h->set_encoding(q.encoding);
-  h->set_stencil(q.stencil);
-  h->set_mode(q.mode);
-  h->set_sign(q.sign);
-  h->set_segment_length(q.engine.segment_length_world);
+  h->set_stencil(stencilOf(q.plan));
+  h->set_mode(modeOf(q.plan));
+  h->set_sign(signOf(q.plan));
+  h->set_segment_length(q.plan.segment_length_world);
   h->set_query_id(query_id);
-  h->set_sign_reason(q.sign_reason);
+  h->set_sign_reason(q.plan.sign_reason);
   h->set_padding(uint32_t(q.padding.voxels));
   h->set_closest_feature(q.closest);
   h->set_expected_voxels(q.expected_voxels);

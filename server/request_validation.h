@@ -14,11 +14,11 @@
 #include <vector>
 
 #include "core/engine.h"
+#include "core/field_plan.h"
 #include "core/field_memory.h"
 #include "core/status.h"
 #include "core/grid.h"
 #include "core/mesh/mesh_grid.h"
-#include "core/seeds/mesh_seeds.h"
 #include "core/tiling.h"
 #include "distband/v1/distband.pb.h"
 #include "server/asset_cache.h"
@@ -27,7 +27,7 @@
 namespace distband {
 
 struct ResolvedQuery {
-  enum class SeedKind { kPoints, kVolume, kMesh };
+  using SeedKind = distband::SeedKind;
   SeedKind seed_kind = SeedKind::kPoints;
   std::vector<Vec3d> points;            ///< kPoints, world coordinates
   std::shared_ptr<const Asset> asset;   ///< kVolume / kMesh (cached or inline)
@@ -38,12 +38,7 @@ struct ResolvedQuery {
   /// Set for a tile (QueryRequest.tile): the engine computes grid.window(tile->window) and only the voxels of
   /// tile->deliver are streamed.
   std::optional<TilePlan> tile;
-  EngineOptions engine;                 ///< threads and interrupted are set by the job
-  v1::SignMode sign = v1::SIGN_MODE_UNSIGNED;            ///< never UNSPECIFIED or AUTO
-  SignMethod mesh_sign = SignMethod::kUnsigned;          ///< kMesh: `sign` for core (never kAuto)
-  std::string sign_reason;                               ///< why `sign` is in force (QueryHeader.sign_reason)
-  v1::Stencil stencil = v1::STENCIL_CUBIC26;             ///< never UNSPECIFIED
-  v1::PropagationMode mode = v1::PROPAGATION_MODE_EXACT; ///< never UNSPECIFIED
+  FieldPlan plan;                       ///< every choice made by core's planner (mode, stencil, sign, limit, ...)
   v1::BrickEncoding encoding = v1::BRICK_ENCODING_FLOAT32;  ///< never UNSPECIFIED
   v1::ClosestFeature closest = v1::CLOSEST_FEATURE_NONE;    ///< what BrickData.closest carries (engine.closest_features)
   uint32_t batch_bytes = 1u << 20;
@@ -51,7 +46,6 @@ struct ResolvedQuery {
   uint64_t expected_voxels = 0;         ///< an estimate of the voxels delivered (QueryHeader.expected_voxels)
   FieldMemoryEstimate memory;           ///< peak bytes of seeds + engine + one output chunk
 
-  bool signedField() const { return sign != v1::SIGN_MODE_UNSIGNED; }
   /// The grid the engine computes on: the tile's window, or the whole grid.
   Grid engineGrid() const { return tile ? grid.window(tile->window) : grid; }
 };
@@ -66,6 +60,11 @@ Status checkInlineMesh(const v1::QueryRequest& request, const ServerOptions& opt
 
 /// Output bricks the engine hands to a query's encoder at once (EngineOptions::max_chunk_bricks).
 inline constexpr size_t kQueryChunkBricks = 1024;
+
+/// A plan's choices as the protocol names them (the header, and a coordinator's requests to its replicas).
+v1::SignMode signOf(const FieldPlan& plan);
+v1::Stencil stencilOf(const FieldPlan& plan);
+v1::PropagationMode modeOf(const FieldPlan& plan);
 
 /// The header message describing a resolved query (first message of the stream).
 void fillQueryHeader(const ResolvedQuery& query, const std::string& query_id, v1::QueryHeader* header);

@@ -11,12 +11,9 @@ std::string buildSeeds(const ResolvedQuery& q, Seeds* seeds, const Interrupter* 
     case ResolvedQuery::SeedKind::kPoints:  // sites in the whole grid's coordinates: tiles stay bit-identical
       return makePointSeeds(q.grid, q.points, seeds, q.tile ? &q.tile->window : nullptr);
     case ResolvedQuery::SeedKind::kVolume:  // a tile's volume covers its window (checked by resolveQuery)
-      return makeVolumeSeeds(q.engineGrid(), *q.asset->mask, q.sign == v1::SIGN_MODE_MASK_INSIDE, seeds, interrupter);
+      return makeVolumeSeeds(q.engineGrid(), *q.asset->mask, q.plan.inside_negative, seeds, interrupter);
     case ResolvedQuery::SeedKind::kMesh: {
-      MeshSeedOptions o;
-      o.mode = q.mode == v1::PROPAGATION_MODE_PAPER ? MeshSiteMode::kPaper : MeshSiteMode::kExactFeature;
-      o.sign = q.mesh_sign;
-      o.limit_voxels = q.engine.limit_world / q.grid.voxelSize();
+      MeshSeedOptions o = q.plan.meshSeedOptions(q.engineGrid());
       o.interrupter = interrupter;
       return makeMeshSeeds(q.engineGrid(), *q.asset->mesh, o, seeds);
     }

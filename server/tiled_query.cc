@@ -83,7 +83,7 @@ bool retriable(Status::Code code) {
 uint64_t TiledQuery::reservedBytes(const ServerOptions& o) { return o.stream_buffer_bytes + o.tile_buffer_bytes; }
 
 std::vector<TilePlan> TiledQuery::plan(const ResolvedQuery& q, uint64_t tile_voxels) {
-  int halo = tileHalo(q.engine.limit_world / q.grid.voxelSize());
+  int halo = tileHalo(q.plan.limitVoxels(q.grid));
   // Without a limit every seed can reach every voxel. Point sites outside a window still give exact distances (the
   // engine seeds them at the window's face and is exact for sites outside its grid), so a margin suffices; mesh and
   // volume seeds outside a window would be lost, so their windows are the whole grid.
@@ -251,12 +251,12 @@ v1::QueryRequest TiledQuery::tileRequest(const Tile& tile) const {
   g->mutable_origin()->set_z(q.grid.origin().z);
   g->set_voxel_size(q.grid.voxelSize());
   *g->mutable_dims() = dimsOf(q.grid.dims());
-  r.set_stencil(q.stencil);
-  r.set_mode(q.mode);
-  r.set_sign(q.sign);
+  r.set_stencil(stencilOf(q.plan));
+  r.set_mode(modeOf(q.plan));
+  r.set_sign(signOf(q.plan));
   r.set_encoding(q.encoding);
-  r.set_segment_length(q.engine.segment_length_world);
-  r.set_limit(q.engine.limit_world);
+  r.set_segment_length(q.plan.segment_length_world);
+  r.set_limit(q.plan.limit_world);
   r.set_max_batch_bytes(q.batch_bytes);
   r.set_closest_feature(q.closest != v1::CLOSEST_FEATURE_NONE);
   setBox(tile.plan.window, r.mutable_tile()->mutable_window());
@@ -309,7 +309,7 @@ std::vector<bool> TiledQuery::meshReach() const {
   // With a limit, a tile no triangle comes within the limit of delivers nothing: its call is skipped (a surface in
   // a large grid touches few tiles). Each triangle marks the tiles its box, grown by the limit, overlaps.
   std::vector<bool> reach(tiles_.size(), true);
-  const double limit = query_.engine.limit_world / query_.grid.voxelSize();
+  const double limit = query_.plan.limitVoxels(query_.grid);
   if (query_.seed_kind != ResolvedQuery::SeedKind::kMesh || !std::isfinite(limit) || tiles_.empty()) return reach;
   std::fill(reach.begin(), reach.end(), false);
   // Tiles form a regular lattice (planTiles): the first tile's size is the step, ordered x fastest.
@@ -340,7 +340,7 @@ TiledQuery::Attempt TiledQuery::runTile(size_t index) {
   Attempt attempt;
   if (!mesh_reach_[index]) return attempt;  // no triangle within the limit: nothing to deliver
   v1::QueryRequest request = tileRequest(tiles_[index]);
-  if (!hasWork(request, query_.sign == v1::SIGN_MODE_MASK_INSIDE)) return attempt;  // nothing within the limit
+  if (!hasWork(request, query_.plan.inside_negative)) return attempt;  // nothing within the limit
   // First attempts go where round_robin sends them; a retry goes to a replica this tile has not failed on.
   std::shared_ptr<v1::DistanceField::Stub> stub;
   std::set<std::string> avoid;
@@ -498,9 +498,9 @@ void TiledQuery::advance() {
       compute += s.compute_seconds();
     }
     if (!have_range) {  // no tile had anything to compute: the protocol still ends with a (empty) segment
-      const double length = query_.engine.segment_length_world;
+      const double length = query_.plan.segment_length_world;
       d.set_lower(length > 0 ? merged_ * length : 0);
-      d.set_upper(length > 0 ? std::min((merged_ + 1) * length, query_.engine.limit_world) : query_.engine.limit_world);
+      d.set_upper(length > 0 ? std::min((merged_ + 1) * length, query_.plan.limit_world) : query_.plan.limit_world);
     }
     d.set_voxels(voxels);
     d.set_bricks(bricks);
@@ -615,7 +615,7 @@ void TiledQuery::run() {
       t.plan = p;
       if (query_.seed_kind != ResolvedQuery::SeedKind::kPoints) continue;
       // Only points that can reach the tile within the limit, in their original order (ties go to the lower index).
-      const double reach = query_.engine.limit_world / query_.grid.voxelSize() + 1;
+      const double reach = query_.plan.limitVoxels(query_.grid) + 1;
       for (size_t i = 0; i < query_.points.size(); ++i)
         if (!std::isfinite(reach) || dist2ToBox(query_.grid.indexOf(query_.points[i]), p.deliver) <= reach * reach)
           t.point_index.push_back(uint32_t(i));

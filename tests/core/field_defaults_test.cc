@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "core/engine.h"
+#include "core/field_plan.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
@@ -87,6 +88,60 @@ TEST(FieldDefaultsTest, ExplicitOrCappedPaddingReportsAClippedBand) {
   ASSERT_EQ(gridForMesh(box, b, &g, &p), "");
   EXPECT_EQ(p.voxels, 0);
   EXPECT_FALSE(p.band_clipped);
+}
+
+// The planner makes every choice left open, the same way for every caller.
+TEST(FieldDefaultsTest, PlannerDecidesModeSitesStencilSignAndLimit) {
+  const Grid grid({0, 0, 0}, 0.25, {32, 32, 32});
+  MeshReport closed, open;
+  open.boundary_edges = 4;
+  FieldPlan p;
+  FieldRequest mesh;
+  mesh.seeds = SeedKind::kMesh;
+  mesh.limit_voxels = 6;
+  ASSERT_EQ(planField(mesh, grid, &closed, &p), "");
+  EXPECT_EQ(p.mode, PropagationMode::kExact);
+  EXPECT_EQ(p.sites, SiteKind::kTriangle);
+  EXPECT_EQ(p.stencil, StencilKind::kFcc12);
+  EXPECT_EQ(p.mesh_sign, SignMethod::kPseudonormal);
+  EXPECT_TRUE(p.signedField());
+  EXPECT_DOUBLE_EQ(p.limit_world, 1.5);  // 6 voxels of 0.25: the limit is kept once, in world units
+  EXPECT_DOUBLE_EQ(p.meshSeedOptions(grid).limit_voxels, 6);
+  EXPECT_DOUBLE_EQ(p.engineOptions().limit_world, 1.5);
+  ASSERT_EQ(planField(mesh, grid, &open, &p), "");
+  EXPECT_EQ(p.mesh_sign, SignMethod::kWinding);
+  EXPECT_EQ(p.signName(), "winding");
+  mesh.mode = PropagationMode::kPaper;
+  mesh.mesh_sign = SignMethod::kUnsigned;
+  ASSERT_EQ(planField(mesh, grid, &closed, &p), "");
+  EXPECT_EQ(p.sites, SiteKind::kPoint);
+  EXPECT_EQ(p.stencil, StencilKind::kCubic26);
+  EXPECT_EQ(p.meshSeedOptions(grid).mode, MeshSiteMode::kPaper);
+  EXPECT_FALSE(p.signedField());
+  EXPECT_EQ(p.sign_reason, "requested");
+
+  FieldRequest volume;
+  volume.seeds = SeedKind::kVolume;
+  volume.limit_world = 2;
+  volume.stencil = StencilKind::kCubic6;
+  ASSERT_EQ(planField(volume, grid, nullptr, &p), "");
+  EXPECT_EQ(p.stencil, StencilKind::kCubic6);
+  EXPECT_FALSE(p.signedField());
+  volume.inside_negative = true;
+  ASSERT_EQ(planField(volume, grid, nullptr, &p), "");
+  EXPECT_TRUE(p.signedField());
+  EXPECT_EQ(p.signName(), "mask-inside");
+  EXPECT_DOUBLE_EQ(p.limit_world, 2);
+
+  FieldRequest points;
+  points.inside_negative = true;
+  EXPECT_NE(planField(points, grid, nullptr, &p), "");
+  points.inside_negative = false;
+  points.mesh_sign = SignMethod::kWinding;
+  EXPECT_NE(planField(points, grid, nullptr, &p).find("winding is for meshes"), std::string::npos);
+  FieldRequest no_report;
+  no_report.seeds = SeedKind::kMesh;
+  EXPECT_NE(planField(no_report, grid, nullptr, &p), "");
 }
 
 TEST(FieldDefaultsTest, AutoSignIsPseudonormalForClosedAndWindingForOpenMeshes) {

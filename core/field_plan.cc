@@ -1,0 +1,66 @@
+#include "core/field_plan.h"
+
+#include <cmath>
+
+#include <fmt/format.h>
+
+namespace distband {
+
+std::string_view FieldPlan::signName() const {
+  if (seeds == SeedKind::kMesh) return signMethodName(mesh_sign);
+  return seeds == SeedKind::kVolume && inside_negative ? "mask-inside" : "unsigned";
+}
+
+EngineOptions FieldPlan::engineOptions() const {
+  EngineOptions o;
+  o.mode = mode;
+  o.stencil = stencil;
+  o.limit_world = limit_world;
+  o.segment_length_world = segment_length_world;
+  o.closest_features = closest_features;
+  o.second_ring = second_ring;
+  return o;
+}
+
+MeshSeedOptions FieldPlan::meshSeedOptions(const Grid& grid) const {
+  MeshSeedOptions o;
+  o.mode = mode == PropagationMode::kPaper ? MeshSiteMode::kPaper : MeshSiteMode::kExactFeature;
+  o.sign = mesh_sign;
+  o.limit_voxels = limitVoxels(grid);
+  return o;
+}
+
+std::string planField(const FieldRequest& r, const Grid& grid, const MeshReport* mesh_report, FieldPlan* out) {
+  FieldPlan p;
+  p.seeds = r.seeds;
+  p.mode = r.mode.value_or(PropagationMode::kExact);
+  // Meshes in exact mode propagate triangle sites; paper mode and the other seeds propagate points.
+  p.sites = r.seeds == SeedKind::kMesh && p.mode == PropagationMode::kExact ? SiteKind::kTriangle : SiteKind::kPoint;
+  p.stencil = r.stencil.value_or(defaultStencil(p.sites));
+  switch (r.seeds) {
+    case SeedKind::kPoints:
+      if (r.inside_negative) return "sign: point seeds are unsigned";
+      p.sign_reason = "points are unsigned";
+      break;
+    case SeedKind::kVolume:
+      p.inside_negative = r.inside_negative;
+      p.sign_reason = r.inside_negative ? "requested" : "default";
+      break;
+    case SeedKind::kMesh:
+      if (r.inside_negative) return "sign: mask-inside is for volume seeds";
+      if (!mesh_report) return "a mesh's sign needs its report";
+      p.mesh_sign = resolveSignMethod(r.mesh_sign.value_or(kDefaultMeshSign), *mesh_report, &p.sign_reason);
+      break;
+  }
+  if (r.seeds != SeedKind::kMesh && r.mesh_sign && *r.mesh_sign != SignMethod::kUnsigned &&
+      *r.mesh_sign != SignMethod::kAuto)
+    return fmt::format("sign: {} is for meshes", signMethodName(*r.mesh_sign));
+  p.limit_world = r.limit_voxels > 0 ? r.limit_voxels * grid.voxelSize() : r.limit_world;
+  p.segment_length_world = r.segment_length_world;
+  p.closest_features = r.closest_features;
+  p.second_ring = r.second_ring;
+  *out = std::move(p);
+  return {};
+}
+
+}  // namespace distband

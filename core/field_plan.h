@@ -1,0 +1,69 @@
+// FieldPlan: the one place the defaults of a distance-field request are decided, for every caller — the server's
+// request validation, `distband compute` and the benches — so a default changes in one line.
+// Contract: planField() turns a FieldRequest (any choice may be left unset) into a FieldPlan where every choice is
+// made: propagation mode (exact), site kind (triangles for meshes in exact mode, points otherwise), stencil
+// (defaultStencil of the site kind), sign (meshes: kDefaultMeshSign, auto, resolved on the mesh's edges with the
+// reason; points unsigned; volumes unsigned unless inside_negative), and the limit in world units. The grid comes
+// first (core/mesh/mesh_grid.h decides its padding from the same limit): a limit given in voxels needs its voxel
+// size. The plan then hands each stage its options, all from the same fields (the limit is stored once, in world
+// units). Returns "" or a message naming the choice that does not fit the seeds. Pure; thread-safe.
+#pragma once
+
+#include <limits>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "core/engine.h"
+#include "core/grid.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/seeds/mesh_seeds.h"
+#include "core/stencil.h"
+
+namespace distband {
+
+enum class SeedKind { kPoints, kVolume, kMesh };
+
+struct FieldRequest {
+  SeedKind seeds = SeedKind::kPoints;
+  std::optional<PropagationMode> mode;   ///< unset: kExact
+  std::optional<StencilKind> stencil;    ///< unset: defaultStencil(the plan's site kind)
+  std::optional<SignMethod> mesh_sign;   ///< meshes only; unset: kDefaultMeshSign
+  bool inside_negative = false;          ///< volumes only: mask voxels get -distance to the outside
+  /// The limit: in voxels of the grid when limit_voxels > 0, else in world units (+infinity: none).
+  double limit_world = std::numeric_limits<double>::infinity();
+  double limit_voxels = 0;
+  double segment_length_world = 0;  ///< 0: one segment
+  bool closest_features = false;
+  std::optional<bool> second_ring;  ///< unset: the engine's default for the site kind
+};
+
+struct FieldPlan {
+  SeedKind seeds = SeedKind::kPoints;
+  PropagationMode mode = PropagationMode::kExact;
+  SiteKind sites = SiteKind::kPoint;
+  StencilKind stencil = StencilKind::kCubic26;
+  SignMethod mesh_sign = SignMethod::kUnsigned;  ///< meshes: the method in force (never kAuto)
+  bool inside_negative = false;                  ///< volumes
+  std::string sign_reason;                       ///< why the sign is what it is ("auto: the mesh is closed", ...)
+  double limit_world = std::numeric_limits<double>::infinity();
+  double segment_length_world = 0;
+  bool closest_features = false;
+  std::optional<bool> second_ring;
+
+  bool signedField() const {
+    return seeds == SeedKind::kMesh ? mesh_sign != SignMethod::kUnsigned : seeds == SeedKind::kVolume && inside_negative;
+  }
+  /// "pseudonormal", "winding", "parity", "mask-inside" or "unsigned".
+  std::string_view signName() const;
+  double limitVoxels(const Grid& grid) const { return limit_world / grid.voxelSize(); }
+  /// The engine's options (no interrupter, threads or chunking: those belong to the run, not the field).
+  EngineOptions engineOptions() const;
+  /// Mesh seeds on `grid` (the grid the engine runs on: for a tile, its window).
+  MeshSeedOptions meshSeedOptions(const Grid& grid) const;
+};
+
+/// `mesh_report`: the loaded mesh's report (needed for meshes: the automatic sign reads its edges), else null.
+std::string planField(const FieldRequest& request, const Grid& grid, const MeshReport* mesh_report, FieldPlan* plan);
+
+}  // namespace distband
