@@ -12,6 +12,7 @@
 #include "client/brick_sink.h"
 #include "core/engine.h"
 #include "core/field_plan.h"
+#include "core/separable_edt.h"
 #include "core/io/field_metadata.h"
 #include "core/io/npy.h"
 #include "core/mesh/mesh_grid.h"
@@ -124,7 +125,8 @@ std::string buildSeedInput(const ComputeArgs& a, const FieldRequest& field, cons
     in->grid = Grid(origin, voxel_size, mask_dims);
     if (std::string e = in->grid.validate(); !e.empty()) return e;
     if (std::string e = planField(field, in->grid, nullptr, &in->plan); !e.empty()) return e;
-    if (std::string e = makeVolumeSeeds(in->grid, *mask, in->plan.inside_negative, &in->seeds, interrupter); !e.empty())
+    if (in->plan.algorithm == FieldAlgorithm::kBand)  // the separable EDT reads the mask itself
+      if (std::string e = makeVolumeSeeds(in->grid, *mask, in->plan.inside_negative, &in->seeds, interrupter); !e.empty())
       return fmt::format("{}: {}", a.volume, e);
     in->mask = mask;
     in->closest_feature = "voxel";
@@ -279,8 +281,12 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   FieldOutputs outputs(plan);
   if (std::string e = outputs.open(description); !e.empty()) return usage(e);
 
-  ctx.out << fmt::format("distband compute: {}, voxel size {:g}, stencil {}, mode {}, segment {}, limit {}, threads {}\n",
-                         in.description, in.grid.voxelSize(), stencilName(stencil), modeName(options.mode),
+  ctx.out << fmt::format("distband compute: {}, voxel size {:g}, {}, mode {}, segment {}, limit {}, threads {}\n",
+                         in.description, in.grid.voxelSize(),
+                         in.plan.algorithm == FieldAlgorithm::kSeparable
+                             ? std::string("algorithm separable (whole-grid volume: exact separable EDT)")
+                             : fmt::format("stencil {}", stencilName(stencil)),
+                         modeName(options.mode),
                          a.segment > 0 ? fmt::format("{:g}", a.segment) : std::string("none"),
                          std::isfinite(limit) ? fmt::format("{:g}", limit) : std::string("none"),
                          a.threads > 0 ? std::to_string(a.threads) : std::string("all"));
@@ -291,7 +297,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   int64_t committed_voxels = 0;
   EngineResult result;
   try {
-    result = computeDistanceField(in.grid, std::move(in.seeds), options, [&](SegmentBricks&& seg) {
+    auto consume = [&](SegmentBricks&& seg) {
       int64_t voxels = 0;
       for (const Brick& b : seg.bricks) voxels += b.mask.count();
       ctx.out << fmt::format("segment {:>3}  {:<18} voxels {:>11}  bricks {:>8}  {:8.3f} s\n", seg.index,
@@ -304,7 +310,10 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
       outputs.add(std::move(seg));
       if (complete) outputs.commitSegment(upper);
       committed_voxels += voxels;
-    });
+    };
+    result = in.plan.algorithm == FieldAlgorithm::kSeparable
+                 ? computeSeparableVolumeField(in.grid, *in.mask, in.plan.inside_negative, options, consume)
+                 : computeDistanceField(in.grid, std::move(in.seeds), options, consume);
   } catch (const std::invalid_argument& e) {
     return usage(e.what());
   } catch (const std::exception& e) {

@@ -61,6 +61,10 @@ FieldMemoryEstimate estimateFieldMemory(const FieldMemoryInput& in) {
       break;
     }
   }
+  if (in.separable) {  // squared distances per grid voxel (twice when signed), segment lists per brick; no seeds
+    engine = double(in.grid_voxels) * (in.signed_volume ? 8 : 4) + double(in.grid_voxels) / kBrickVoxels * 24;
+    seeds = 0;
+  }
   const double chunk_bricks = in.chunk_bricks ? std::min(double(in.chunk_bricks), touched_bricks) : touched_bricks;
   e.engine_bytes = uint64_t(engine * kSafety) + kFixedBytes;
   e.seed_bytes = uint64_t(seeds * kSafety);

@@ -38,6 +38,7 @@ struct FieldMemoryInput {
   /// the estimate bounds by the touched voxels.
   uint64_t chunk_bricks = 0;
   bool closest_features = false;  ///< EngineOptions::closest_features: 4 KiB more per output brick
+  bool separable = false;  ///< FieldAlgorithm::kSeparable: 4 bytes per grid voxel (8 signed), no band state
 };
 
 struct FieldMemoryEstimate {

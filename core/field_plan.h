@@ -1,7 +1,8 @@
 // FieldPlan: the one place the defaults of a distance-field request are decided, for every caller — the server's
 // request validation, `distband compute` and the benches — so a default changes in one line.
 // Contract: planField() turns a FieldRequest (any choice may be left unset) into a FieldPlan where every choice is
-// made: propagation mode (exact), site kind (triangles for meshes in exact mode, points otherwise), stencil
+// made: the algorithm (the separable EDT for a seed volume without a limit, in exact mode, with no stencil asked
+// for and no closest features; the band otherwise), propagation mode (exact), site kind (triangles for meshes in exact mode, points otherwise), stencil
 // (defaultStencil of the site kind), sign (meshes: kDefaultMeshSign, auto, resolved on the mesh's edges with the
 // reason; points unsigned; volumes unsigned unless inside_negative), and the limit in world units. The grid comes
 // first (core/mesh/mesh_grid.h decides its padding from the same limit): a limit given in voxels needs its voxel
@@ -24,6 +25,11 @@ namespace distband {
 
 enum class SeedKind { kPoints, kVolume, kMesh };
 
+/// How the field is computed: the active band (any seeds, any limit), or, for a seed volume over the whole grid
+/// (no limit), the separable exact EDT (core/separable_edt.h), several times faster there.
+enum class FieldAlgorithm { kBand, kSeparable };
+std::string_view algorithmName(FieldAlgorithm algorithm);  ///< "band", "separable"
+
 struct FieldRequest {
   SeedKind seeds = SeedKind::kPoints;
   std::optional<PropagationMode> mode;   ///< unset: kExact
@@ -40,6 +46,7 @@ struct FieldRequest {
 
 struct FieldPlan {
   SeedKind seeds = SeedKind::kPoints;
+  FieldAlgorithm algorithm = FieldAlgorithm::kBand;
   PropagationMode mode = PropagationMode::kExact;
   SiteKind sites = SiteKind::kPoint;
   StencilKind stencil = StencilKind::kCubic26;

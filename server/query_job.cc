@@ -7,6 +7,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "core/separable_edt.h"
 #include "proto/brick_codec.h"
 #include "server/seed_builder.h"
 
@@ -44,6 +45,16 @@ void QueryJob::join() {
 void QueryJob::run() {
   try {
     arena_->execute([&] {
+      EngineOptions options = query_.plan.engineOptions();
+      options.threads = 0;  // the shared arena we are executing in
+      options.interrupter = interrupter_;
+      options.max_chunk_bricks = kQueryChunkBricks;
+      if (query_.plan.algorithm == FieldAlgorithm::kSeparable) {  // a whole-grid volume: no band, no seeds to build
+        segment_started_ = Clock::now();
+        result_ = computeSeparableVolumeField(query_.engineGrid(), *query_.asset->mask, query_.plan.inside_negative,
+                                              options, [this](SegmentBricks&& s) { emitChunk(std::move(s)); });
+        return;
+      }
       const auto t0 = Clock::now();
       Seeds seeds;
       const std::string e = buildSeeds(query_, &seeds, interrupter_);
@@ -57,10 +68,6 @@ void QueryJob::run() {
         status_ = Status::Internal("seeds: " + e);
         return;
       }
-      EngineOptions options = query_.plan.engineOptions();
-      options.threads = 0;  // the shared arena we are executing in
-      options.interrupter = interrupter_;
-      options.max_chunk_bricks = kQueryChunkBricks;
       segment_started_ = Clock::now();
       result_ = computeDistanceField(query_.engineGrid(), std::move(seeds), options,
                                      [this](SegmentBricks&& s) { emitChunk(std::move(s)); });

@@ -219,6 +219,7 @@ void estimateMemory(ResolvedQuery* q) {
   in.grid_voxels = uint64_t(grid.voxelCount());
   in.chunk_bricks = kQueryChunkBricks;
   in.closest_features = q->plan.closest_features;
+  in.separable = q->plan.algorithm == FieldAlgorithm::kSeparable;
   switch (q->seed_kind) {
     case SeedKind::kPoints:
       in.seed_kind = FieldMemoryInput::SeedKind::kPoints;
@@ -443,6 +444,7 @@ void fillQueryHeader(const ResolvedQuery& q, const std::string& query_id, v1::Qu
   h->set_padding(uint32_t(q.padding.voxels));
   h->set_closest_feature(q.closest);
   h->set_expected_voxels(q.expected_voxels);
+  h->set_algorithm(std::string(algorithmName(q.plan.algorithm)));
   h->set_band_clipped(q.padding.band_clipped);
 }
 

@@ -51,11 +51,17 @@ TEST(FieldDefaultsTest, DefaultPaddingHoldsTheLimit) {
     Grid g;
     GridPadding p;
     ASSERT_EQ(gridForMesh(box, o, &g, &p), "");
-    if (c.expect_padding >= 0) EXPECT_EQ(p.voxels, c.expect_padding) << c.voxel_size << " " << c.limit_world;
+    if (c.expect_padding >= 0) {
+      EXPECT_EQ(p.voxels, c.expect_padding) << c.voxel_size << " " << c.limit_world;
+    }
     const double limit_voxels = c.limit_voxels > 0 ? c.limit_voxels : c.limit_world / g.voxelSize();
-    if (std::isfinite(limit_voxels)) EXPECT_GE(p.voxels, limit_voxels - 1e-9);
+    if (std::isfinite(limit_voxels)) {
+      EXPECT_GE(p.voxels, limit_voxels - 1e-9);
+    }
     EXPECT_FALSE(p.band_clipped);
-    if (c.resolution > 0) EXPECT_EQ(std::max({g.dims().x, g.dims().y, g.dims().z}), c.resolution);
+    if (c.resolution > 0) {
+      EXPECT_EQ(std::max({g.dims().x, g.dims().y, g.dims().z}), c.resolution);
+    }
     EXPECT_NEAR(g.origin().x, -p.voxels * g.voxelSize(), 1e-12);
   }
 }

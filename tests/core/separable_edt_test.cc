@@ -1,0 +1,150 @@
+// Tests for core/separable_edt: the whole-grid volume field against the exact EDT oracle (tests/support/exact_edt,
+// which shares no code with core/), streamed under the band engine's contract (segments nearest first, each voxel
+// once, bricks sorted, chunks), identical for any thread count, stopped by its interrupter; and the planner's
+// choice of it.
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/field_plan.h"
+#include "core/separable_edt.h"
+#include "tests/support/exact_edt.h"
+
+namespace distband {
+namespace {
+
+std::vector<uint8_t> randomBlobs(const Coord& d, int count, uint64_t seed) {
+  std::vector<uint8_t> mask(size_t(d.x) * d.y * d.z, 0);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> ux(0, d.x), uy(0, d.y), uz(0, d.z), ur(1, 6);
+  for (int i = 0; i < count; ++i) {
+    const double cx = ux(rng), cy = uy(rng), cz = uz(rng), r = ur(rng);
+    for (int z = 0; z < d.z; ++z)
+      for (int y = 0; y < d.y; ++y)
+        for (int x = 0; x < d.x; ++x)
+          if ((x - cx) * (x - cx) + (y - cy) * (y - cy) + (z - cz) * (z - cz) <= r * r)
+            mask[(size_t(z) * d.y + y) * d.x + x] = 1;
+  }
+  return mask;
+}
+
+struct Collected {
+  std::vector<float> values;
+  std::vector<int> times_delivered;
+  std::string order_error;
+  EngineResult result;
+};
+
+Collected run(const Grid& grid, const std::vector<uint8_t>& mask, bool inside_negative, const EngineOptions& o) {
+  Collected c;
+  c.values.assign(size_t(grid.voxelCount()), NAN);
+  c.times_delivered.assign(size_t(grid.voxelCount()), 0);
+  int open_segment = 0;
+  bool saw_last = false;
+  c.result = computeSeparableVolumeField(grid, mask, inside_negative, o, [&](SegmentBricks&& s) {
+    if (s.index != open_segment) c.order_error = "segment out of order";
+    if (saw_last) c.order_error = "bricks after the last segment";
+    for (size_t i = 1; i < s.bricks.size(); ++i) {
+      const Coord a = s.bricks[i - 1].origin, b = s.bricks[i].origin;
+      if (std::tie(a.z, a.y, a.x) >= std::tie(b.z, b.y, b.x)) c.order_error = "bricks not sorted";
+    }
+    if (o.max_chunk_bricks && s.bricks.size() > o.max_chunk_bricks) c.order_error = "chunk too large";
+    for (const Brick& b : s.bricks) {
+      if (b.mask.empty()) c.order_error = "an empty brick";
+      for (int i = 0; i < kBrickVoxels; ++i) {
+        if (!b.mask.test(i)) continue;
+        const Coord v = b.origin + brickLocal(i);
+        const size_t k = size_t(grid.denseIndex(v));
+        c.values[k] = b.values[i];
+        ++c.times_delivered[k];
+        const double d = std::abs(b.values[i]);
+        const bool in = s.index == 0 ? d <= s.upper_world * (1 + 1e-6) : d > s.lower_world * (1 - 1e-6) &&
+                                                                          d <= s.upper_world * (1 + 1e-6);
+        if (!in) c.order_error = "a voxel outside its segment's range";
+      }
+    }
+    if (s.complete) ++open_segment;
+    saw_last |= s.last;
+  });
+  if (!saw_last && !c.result.interrupted) c.order_error = "no last segment";
+  return c;
+}
+
+TEST(SeparableEdtTest, MatchesTheExactEdtUnsignedAndSignedWithSegmentsAndChunks) {
+  const Coord d{45, 38, 29};  // not multiples of 8: partial bricks on the far faces
+  const Grid grid({1, -2, 0.5}, 0.5, d);
+  const std::vector<uint8_t> mask = randomBlobs(d, 6, 11);
+  const std::vector<double> exact2 = oracle::edtSqr(d.x, d.y, d.z, mask);
+  const std::vector<double> signed_exact = oracle::signedEdt(d.x, d.y, d.z, mask);
+  for (bool inside_negative : {false, true})
+    for (double segment : {0.0, 1.0, 3.7}) {
+      EngineOptions o;
+      o.segment_length_world = segment;
+      o.max_chunk_bricks = segment == 1.0 ? 7 : 0;
+      const Collected c = run(grid, mask, inside_negative, o);
+      EXPECT_EQ(c.order_error, "") << inside_negative << " " << segment;
+      int64_t wrong = 0, missing = 0;
+      for (size_t i = 0; i < c.values.size(); ++i) {
+        missing += c.times_delivered[i] != 1;
+        const double want = 0.5 * (inside_negative ? signed_exact[i] : std::sqrt(exact2[i]));
+        wrong += std::abs(c.values[i] - want) > 1e-5;
+      }
+      EXPECT_EQ(missing, 0) << "every voxel exactly once";
+      EXPECT_EQ(wrong, 0) << inside_negative << " " << segment;
+      EXPECT_EQ(c.result.voxels, grid.voxelCount());
+      if (segment > 0) EXPECT_GT(c.result.segments.size(), 3u);
+    }
+}
+
+TEST(SeparableEdtTest, IdenticalForAnyThreadCountAndStoppedByItsInterrupter) {
+  const Coord d{64, 64, 64};
+  const Grid grid({0, 0, 0}, 1, d);
+  const std::vector<uint8_t> mask = randomBlobs(d, 10, 3);
+  EngineOptions o;
+  o.segment_length_world = 4;
+  o.threads = 1;
+  const Collected one = run(grid, mask, true, o);
+  o.threads = 2;
+  const Collected two = run(grid, mask, true, o);
+  EXPECT_EQ(one.values, two.values);
+  Interrupter stop;
+  stop.cancel(Status::Code::kCancelled, "test");
+  o.interrupter = &stop;
+  const Collected stopped = run(grid, mask, false, o);
+  EXPECT_TRUE(stopped.result.interrupted);
+  EXPECT_EQ(stopped.result.voxels, 0);
+}
+
+TEST(SeparableEdtTest, RejectsMasksItCannotMeasure) {
+  const Grid grid({0, 0, 0}, 1, {8, 8, 8});
+  EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(512, 0), false, {}, {}), std::invalid_argument);
+  EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(512, 1), true, {}, {}), std::invalid_argument);
+  EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(100, 1), false, {}, {}), std::invalid_argument);
+}
+
+TEST(SeparableEdtTest, ThePlannerPicksItForWholeGridVolumesOnly) {
+  const Grid grid({0, 0, 0}, 1, {16, 16, 16});
+  FieldPlan p;
+  FieldRequest r;
+  r.seeds = SeedKind::kVolume;
+  ASSERT_EQ(planField(r, grid, nullptr, &p), "");
+  EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
+  FieldRequest limited = r;
+  limited.limit_world = 5;  // a limit: the work must follow the band
+  ASSERT_EQ(planField(limited, grid, nullptr, &p), "");
+  EXPECT_EQ(p.algorithm, FieldAlgorithm::kBand);
+  for (auto change : {+[](FieldRequest& f) { f.stencil = StencilKind::kCubic26; },
+                      +[](FieldRequest& f) { f.mode = PropagationMode::kPaper; },
+                      +[](FieldRequest& f) { f.closest_features = true; },
+                      +[](FieldRequest& f) { f.seeds = SeedKind::kPoints; }}) {
+    FieldRequest other = r;
+    change(other);
+    ASSERT_EQ(planField(other, grid, nullptr, &p), "");
+    EXPECT_EQ(p.algorithm, FieldAlgorithm::kBand);
+  }
+}
+
+}  // namespace
+}  // namespace distband
