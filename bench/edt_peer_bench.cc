@@ -26,6 +26,7 @@
 #include "core/engine.h"
 #include "core/field_plan.h"
 #include "core/separable_edt.h"
+#include "core/seeds/point_seeds.h"
 #include "core/seeds/volume_seeds.h"
 
 namespace distband {
@@ -39,6 +40,7 @@ struct Case {
   int n;
   double limit_voxels;  // infinity: full domain
   std::vector<uint8_t> (*mask)(int n);
+  bool as_points = false;  // seed the engine with the mask's voxels as a point list (PointList seeds: the band)
 };
 
 std::vector<uint8_t> twoVoxels(int n) {
@@ -86,8 +88,14 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm) {
   std::vector<double> times;
   for (int r = 0; r < reps; ++r) {
     Seeds seeds;
-    if (algorithm == FieldAlgorithm::kBand)
+    if (c.as_points) {
+      std::vector<Vec3d> points;
+      for (size_t i = 0; i < mask.size(); ++i)
+        if (mask[i]) points.push_back({double(i % n), double(i / n % n), double(i / (size_t(n) * n))});
+      if (std::string e = makePointSeeds(grid, points, &seeds); !e.empty()) throw std::runtime_error(e);
+    } else if (algorithm == FieldAlgorithm::kBand) {
       if (std::string e = makeVolumeSeeds(grid, mask, false, &seeds); !e.empty()) throw std::runtime_error(e);
+    }
     EngineOptions o;
     o.threads = threads;
     o.limit_world = c.limit_voxels;
@@ -144,7 +152,8 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   const double inf = std::numeric_limits<double>::infinity();
   const std::vector<Case> cases = {
-      {"two points, full domain", 256, inf, twoVoxels},
+      {"two points (point seeds), full domain", 256, inf, twoVoxels, true},
+      {"two seed voxels, full domain", 256, inf, twoVoxels},
       {"sphere shell, full domain", 256, inf, bench::sphereShellMask},
       {"sphere shell, full domain", 512, inf, bench::sphereShellMask},
       {"sphere band, limit 5 voxels", 512, 5, bench::sphereShellMask},
@@ -157,7 +166,7 @@ int main(int argc, char** argv) {
     if (!only.empty() && c.name != only) continue;
     // The product's choice (core's planner), then, for whole-grid rows, the band forced for comparison.
     FieldRequest request;
-    request.seeds = SeedKind::kVolume;
+    request.seeds = c.as_points ? SeedKind::kPoints : SeedKind::kVolume;
     request.limit_world = c.limit_voxels;
     FieldPlan plan;
     planField(request, Grid({0, 0, 0}, 1.0, {c.n, c.n, c.n}), nullptr, &plan);

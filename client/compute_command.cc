@@ -125,8 +125,10 @@ std::string buildSeedInput(const ComputeArgs& a, const FieldRequest& field, cons
     in->grid = Grid(origin, voxel_size, mask_dims);
     if (std::string e = in->grid.validate(); !e.empty()) return e;
     if (std::string e = planField(field, in->grid, nullptr, &in->plan); !e.empty()) return e;
-    if (in->plan.algorithm == FieldAlgorithm::kBand)  // the separable EDT reads the mask itself
-      if (std::string e = makeVolumeSeeds(in->grid, *mask, in->plan.inside_negative, &in->seeds, interrupter); !e.empty())
+    if (in->plan.algorithm == FieldAlgorithm::kSeparable) {  // the separable EDT reads the mask itself
+      if (std::string e = checkSeedMask(*mask, in->plan.inside_negative); !e.empty())
+        return fmt::format("{}: {}", a.volume, e);
+    } else if (std::string e = makeVolumeSeeds(in->grid, *mask, in->plan.inside_negative, &in->seeds, interrupter); !e.empty())
       return fmt::format("{}: {}", a.volume, e);
     in->mask = mask;
     in->closest_feature = "voxel";

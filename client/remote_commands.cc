@@ -259,6 +259,9 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
                            h.query_id(), grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
                            grid.origin().x, grid.origin().y, grid.origin().z, h.limit(),
                            h.signed_() ? "signed" : "unsigned");
+    if (h.algorithm() == "separable")
+      ctx.out << "algorithm: separable (a seed volume over the whole grid: an exact separable EDT; the first segment "
+                 "arrives once the whole field is known)\n";
     const std::string sign = signName(h.sign());
     if (h.sign() != v1::SIGN_MODE_UNSIGNED || h.sign_reason().rfind("auto", 0) == 0)
       ctx.out << fmt::format("sign: {} ({})\n", sign, h.sign_reason());

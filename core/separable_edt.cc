@@ -11,6 +11,8 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "core/seeds/volume_seeds.h"
+
 namespace distband {
 namespace {
 
@@ -124,6 +126,7 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
   if (std::string e = grid.validate(); !e.empty()) throw std::invalid_argument("grid: " + e);
   if (int64_t(mask.size()) != grid.voxelCount())
     throw std::invalid_argument(fmt::format("the mask has {} bytes, the grid {} voxels", mask.size(), grid.voxelCount()));
+  if (std::string e = checkSeedMask(mask, inside_negative); !e.empty()) throw std::invalid_argument(e);
   EngineResult result;
   auto body = [&] {
     using Clock = std::chrono::steady_clock;
@@ -136,8 +139,6 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
       result.interrupted = true;
       return;
     }
-    if (!outside.empty() && outside[0] == kFar) throw std::invalid_argument("the seed mask has no seed voxel");
-    if (inside_negative && inside[0] == kFar) throw std::invalid_argument("the seed mask has no outside voxel");
     // |distance| in voxels, and its segment: (i L, (i + 1) L], segment 0 including 0 (one segment when L = 0).
     const double h = grid.voxelSize();
     const double length = options.segment_length_world > 0 ? options.segment_length_world / h : 0;

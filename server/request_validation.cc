@@ -360,6 +360,10 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
   if (std::string e = planField(fr, q.grid, q.seed_kind == SeedKind::kMesh ? &q.asset->mesh_report : nullptr, &q.plan);
       !e.empty())
     return invalid(e);
+  if (q.seed_kind == SeedKind::kVolume && q.plan.inside_negative &&
+      q.asset->footprint->seed_voxels == uint64_t(q.asset->dims.x) * q.asset->dims.y * q.asset->dims.z)
+    return invalid("sign: SIGN_MODE_MASK_INSIDE needs a zero voxel in the mask (every voxel is inside, so the "
+                   "distance to the outside is undefined)");
   if (r.has_tile())
     if (Status s = resolveTile(r.tile(), q.grid, &q); !s.ok()) return s;
   // The budget bounds the work: the voxels computed (a tile's window, not the whole grid it belongs to).

@@ -24,6 +24,14 @@ struct Slice {
 // Nothing here allocates per grid voxel beyond the signed case's region (1 byte a voxel, which the engine needs): a
 // dense table of site ids (4 bytes a voxel, 4 GiB at 1024^3) used to stand here, and filling it, one thread
 // first-touching every page, took seconds that a cancel could not interrupt.
+std::string checkSeedMask(const std::vector<uint8_t>& mask, bool signed_distance) {
+  const bool any_seed = std::any_of(mask.begin(), mask.end(), [](uint8_t v) { return v != 0; });
+  if (!any_seed) return "the seed mask has no nonzero voxel";
+  if (signed_distance && std::none_of(mask.begin(), mask.end(), [](uint8_t v) { return v == 0; }))
+    return "the seed mask has no zero voxel, so a signed field is undefined";
+  return {};
+}
+
 std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out,
                             const Interrupter* interrupter) {
   if (static_cast<int64_t>(mask.size()) != grid.voxelCount())
@@ -63,9 +71,7 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
     if (next >= kNoSite) return fmt::format("the seed mask has more than {} boundary voxels", kNoSite - 1);
     first_site[z + 1] = uint32_t(next);
   }
-  if (n_inside == 0) return "the seed mask has no nonzero voxel";
-  if (signed_distance && n_inside == grid.voxelCount())
-    return "the seed mask has no zero voxel, so a signed field is undefined";
+  if (n_inside == 0 || (signed_distance && n_inside == grid.voxelCount())) return checkSeedMask(mask, signed_distance);
 
   if (signed_distance) {
     // 2. Each boundary voxel starts with the nearest voxel across the boundary (a 6-neighbour, distance 1): the

@@ -18,6 +18,10 @@
 
 namespace distband {
 
+/// The mask's own precondition, shared by the band's seeds and the separable EDT: "" or why no field exists (an
+/// empty mask; signed: a mask with no zero voxel). O(mask) with an early exit.
+std::string checkSeedMask(const std::vector<uint8_t>& mask, bool signed_distance);
+
 std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out,
                             const Interrupter* interrupter = nullptr);
 

@@ -25,6 +25,7 @@
 #include "proto/brick_codec.h"
 #include "server/server.h"
 #include "tests/integration/service_fixture.h"
+#include "tests/support/exact_edt.h"
 
 namespace distband {
 namespace {
@@ -138,6 +139,37 @@ TEST(ServiceTest, VolumeUploadAndSignedQueryMatchInProcess) {
   bool any_negative = false;
   for (float v : s.field->values()) any_negative |= v < 0;
   EXPECT_TRUE(any_negative);
+}
+
+// A volume without a limit is the whole grid: the server picks the separable EDT, says so in the header, and the
+// streamed field equals the exact EDT (tests/support/exact_edt) at every voxel, nearest segment first.
+TEST(ServiceTest, WholeGridVolumeIsTheExactSeparableEdt) {
+  TestServer ts;
+  const Coord dims{37, 30, 26};
+  std::vector<uint8_t> mask(size_t(dims.x) * dims.y * dims.z, 0);
+  for (int z = 0; z < dims.z; ++z)
+    for (int y = 0; y < dims.y; ++y)
+      for (int x = 0; x < dims.x; ++x)
+        mask[(size_t(z) * dims.y + y) * dims.x + x] = std::hypot(x - 12.0, y - 15.0, z - 11.0) < 6.5 || (x == 30 && y == 5);
+  v1::QueryRequest r;
+  r.mutable_volume()->mutable_dims()->set_x(uint32_t(dims.x));
+  r.mutable_volume()->mutable_dims()->set_y(uint32_t(dims.y));
+  r.mutable_volume()->mutable_dims()->set_z(uint32_t(dims.z));
+  r.mutable_volume()->set_mask(std::string(mask.begin(), mask.end()));
+  r.mutable_grid()->set_voxel_size(0.5);
+  r.set_sign(v1::SIGN_MODE_MASK_INSIDE);
+  r.set_segment_length(2.0);
+  Streamed s = stream(ts.client(), r, NAN);
+  ASSERT_TRUE(s.result.status.ok()) << s.result.status.error_message();
+  EXPECT_EQ(s.result.header.algorithm(), "separable");
+  EXPECT_TRUE(s.order_error.empty()) << s.order_error;
+  EXPECT_GT(s.done.size(), 3u);
+  const std::vector<double> exact = oracle::signedEdt(dims.x, dims.y, dims.z, mask);
+  int64_t wrong = 0;
+  for (size_t i = 0; i < exact.size(); ++i) wrong += !(std::abs(s.field->values()[i] - 0.5 * exact[i]) <= 1e-5);
+  EXPECT_EQ(wrong, 0);
+  r.set_limit(3.0);  // a limit: the band, whose work follows the voxels inside it
+  EXPECT_EQ(stream(ts.client(), r, 3.0f).result.header.algorithm(), "band");
 }
 
 TEST(ServiceTest, MeshUploadInChunksAndQueryMatchInProcess) {
@@ -395,6 +427,19 @@ TEST(ServiceTest, EachBadInputGetsItsStatusAndTheServerKeepsServing) {
             grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(ts.client().uploadVolume({2, 2, 2}, std::vector<uint8_t>(7, 1), "short", &up).error_code(),
             grpc::StatusCode::INVALID_ARGUMENT);
+  // A signed volume needs an outside: refused before compute, naming the field.
+  v1::QueryRequest full;
+  full.mutable_volume()->mutable_dims()->set_x(8);
+  full.mutable_volume()->mutable_dims()->set_y(8);
+  full.mutable_volume()->mutable_dims()->set_z(8);
+  full.mutable_volume()->set_mask(std::string(512, '\1'));
+  full.mutable_grid();
+  full.set_sign(v1::SIGN_MODE_MASK_INSIDE);
+  const RemoteQueryResult all_inside = ts.client().query(full, {});
+  EXPECT_EQ(all_inside.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(all_inside.status.error_message().find("sign: SIGN_MODE_MASK_INSIDE needs a zero voxel"),
+            std::string::npos)
+      << all_inside.status.error_message();
   // Still serving.
   Streamed ok = stream(ts.client(), pointsRequest({{1, 2, 3}}, {16, 16, 16}, 1.0, 0, 0), 0);
   EXPECT_TRUE(ok.result.status.ok()) << ok.result.status.error_message();

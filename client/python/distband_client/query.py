@@ -43,6 +43,7 @@ class Header:
     closest_feature: str    # 'none', 'triangle', 'point' or 'voxel'
     expected_voxels: int    # the server's estimate of the voxels it will deliver; 0 = unknown
     query_id: str
+    algorithm: str          # "band" or "separable" (a seed volume over the whole grid)
 
     @classmethod
     def from_proto(cls, h):
@@ -55,7 +56,7 @@ class Header:
                    encoding=_enum_name(pb.BrickEncoding, h.encoding, "BRICK_ENCODING_"),
                    segment_length=h.segment_length,
                    closest_feature=_enum_name(pb.ClosestFeature, h.closest_feature, "CLOSEST_FEATURE_"),
-                   expected_voxels=h.expected_voxels, query_id=h.query_id)
+                   expected_voxels=h.expected_voxels, query_id=h.query_id, algorithm=h.algorithm)
 
 
 @dataclasses.dataclass
