@@ -332,13 +332,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   const std::string error = outputs.finish(run, &wrote);
   for (const std::string& line : wrote) ctx.out << line << "\n";
   if (result.interrupted) {
-    if (!error.empty())
-      ctx.err << "distband compute: interrupted; " << error << "\n";
-    else
-      ctx.err << fmt::format("distband compute: interrupted; kept the {} complete segment{} (every voxel with "
-                             "|distance| <= {:g}), marked complete=false\n",
-                             outputs.committedSegments(), outputs.committedSegments() == 1 ? "" : "s",
-                             outputs.completeUpTo());
+    ctx.err << "distband compute: interrupted; " << (error.empty() ? outputs.keptSummary() : error) << "\n";
     return kExitInterrupted;
   }
   if (!error.empty()) {

@@ -165,6 +165,11 @@ std::string FieldOutputs::writeClosest() {
   return writeNpyInt32(path, ids, field_.grid.dims());
 }
 
+std::string FieldOutputs::keptSummary() const {
+  return fmt::format("kept the {} complete segment{} (every voxel with |distance| <= {:g}), marked complete=false",
+                     segments_, segments_ == 1 ? "" : "s", complete_up_to_);
+}
+
 std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>* lines) {
   if (run.complete && !open_segment_.empty()) commitSegment(std::numeric_limits<double>::infinity());
   open_segment_.clear();  // interrupted: the half-delivered segment is dropped

@@ -92,6 +92,8 @@ class FieldOutputs {
   void commitSegment(double upper_world);
   int committedSegments() const { return segments_; }
   double completeUpTo() const { return complete_up_to_; }  ///< upper end of the last committed segment
+  /// After an interrupted finish(): what was kept, for the user ("kept the 6 complete segments (...)").
+  std::string keptSummary() const;
   std::string finish(const RunOutcome& run, std::vector<std::string>* lines);
 
  private:

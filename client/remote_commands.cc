@@ -359,13 +359,7 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
       std::vector<std::string> wrote;
       const std::string e = result.have_header ? outputs.finish(run, &wrote) : "nothing arrived: nothing written";
       for (const std::string& line : wrote) ctx.out << line << "\n";
-      if (!e.empty())
-        ctx.err << "distband query: interrupted; " << e << "\n";
-      else
-        ctx.err << fmt::format("distband query: interrupted; kept the {} complete segment{} received (every voxel "
-                               "with |distance| <= {:g}), marked complete=false\n",
-                               outputs.committedSegments(), outputs.committedSegments() == 1 ? "" : "s",
-                               outputs.completeUpTo());
+      ctx.err << "distband query: interrupted; " << (e.empty() ? outputs.keptSummary() : e) << "\n";
       return kExitInterrupted;
     }
     ctx.err << "distband query: " << describe(result.status) << "\n";

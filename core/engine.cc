@@ -28,10 +28,10 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
-#include <tbb/task_arena.h>
 
 #include "core/geometry.h"
 #include "core/interruptible.h"
+#include "core/thread_arena.h"
 
 namespace distband {
 
@@ -1225,12 +1225,7 @@ EngineResult runEngine(const Grid& grid, const Seeds& seeds, const EngineOptions
     run.reset();
     result.release_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
-  if (options.threads > 0) {
-    tbb::task_arena arena(options.threads);
-    arena.execute(body);
-  } else {
-    body();
-  }
+  runWithThreads(options.threads, body);
   return result;
 }
 

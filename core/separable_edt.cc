@@ -9,9 +9,9 @@
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include "core/seeds/volume_seeds.h"
+#include "core/thread_arena.h"
 
 namespace distband {
 namespace {
@@ -237,12 +237,7 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
     }
     result.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   };
-  if (options.threads > 0) {
-    tbb::task_arena arena(options.threads);
-    arena.execute(body);
-  } else {
-    body();
-  }
+  runWithThreads(options.threads, body);
   return result;
 }
 
