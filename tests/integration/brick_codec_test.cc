@@ -113,6 +113,40 @@ TEST(BrickCodecTest, RoundTripKeepsMaskedValuesOnly) {
   }
 }
 
+// Closest-feature ids ride beside the values: int32 for triangles and points, int64 for voxels, masked voxels only.
+TEST(BrickCodecTest, ClosestFeatureIdsRoundTripAndTheirLengthIsChecked) {
+  Brick b;
+  b.origin = {0, 8, 16};
+  b.closest.assign(kBrickVoxels, -1);
+  for (int i = 0; i < kBrickVoxels; i += 3) {
+    b.mask.set(i);
+    b.values[i] = float(i);
+    b.closest[size_t(i)] = int64_t(i) * 7919 + (int64_t(1) << 33);  // beyond 32 bits: only VOXEL keeps it
+  }
+  for (auto kind : {v1::CLOSEST_FEATURE_POINT, v1::CLOSEST_FEATURE_VOXEL}) {
+    v1::BrickData data;
+    encodeBrick(b, v1::BRICK_ENCODING_FLOAT32, &data, kind);
+    EXPECT_EQ(data.closest().size(), size_t(b.mask.count()) * bytesPerClosest(kind));
+    Brick out;
+    ASSERT_EQ(decodeBrick(data, v1::BRICK_ENCODING_FLOAT32, &out, kind), "");
+    ASSERT_EQ(out.closest.size(), size_t(kBrickVoxels));
+    for (int i = 0; i < kBrickVoxels; ++i) {
+      const int64_t want = !b.mask.test(i)                      ? -1
+                           : kind == v1::CLOSEST_FEATURE_VOXEL ? b.closest[size_t(i)]
+                                                                : int64_t(int32_t(b.closest[size_t(i)]));
+      EXPECT_EQ(out.closest[size_t(i)], want) << i;
+    }
+    data.mutable_closest()->pop_back();
+    EXPECT_NE(decodeBrick(data, v1::BRICK_ENCODING_FLOAT32, &out, kind).find("closest-feature bytes"),
+              std::string::npos);
+  }
+  v1::BrickData plain;
+  encodeBrick(b, v1::BRICK_ENCODING_FLOAT32, &plain);
+  EXPECT_TRUE(plain.closest().empty());
+  Brick out;
+  EXPECT_NE(decodeBrick(plain, v1::BRICK_ENCODING_FLOAT32, &out, v1::CLOSEST_FEATURE_TRIANGLE), "");
+}
+
 TEST(BrickCodecTest, MalformedBricksAreRejected) {
   Brick b;
   b.mask.set(5);
