@@ -62,7 +62,6 @@ struct SeedInput {
   std::string description;
   FieldPlan plan;                  ///< every choice made (core's planner), once the grid is known
   GridPadding padding{-1, false};  ///< meshes: the padding used (-1: explicit dims)
-  std::string closest_feature;     ///< what a voxel's closest-feature id names
 };
 
 std::string buildMeshInput(const ComputeArgs& a, const FieldRequest& field, const Interrupter* interrupter,
@@ -89,7 +88,6 @@ std::string buildMeshInput(const ComputeArgs& a, const FieldRequest& field, cons
   if (std::string e = makeMeshSeeds(in->grid, mesh, so, &in->seeds); !e.empty()) return fmt::format("{}: {}", a.mesh, e);
   in->signed_distance = in->plan.signedField();
   in->mesh = true;
-  in->closest_feature = "triangle";
   const Coord d = in->grid.dims();
   in->description = fmt::format("mesh {} ({}; grid {}x{}x{}, padding {}, sites {}, sign {} ({}))", a.mesh,
                                 report.summary(), d.x, d.y, d.z, in->padding.voxels, meshSiteModeName(so.mode),
@@ -131,7 +129,6 @@ std::string buildSeedInput(const ComputeArgs& a, const FieldRequest& field, cons
     } else if (std::string e = makeVolumeSeeds(in->grid, *mask, in->plan.inside_negative, &in->seeds, interrupter); !e.empty())
       return fmt::format("{}: {}", a.volume, e);
     in->mask = mask;
-    in->closest_feature = "voxel";
     in->description = fmt::format("volume {} ({}x{}x{}, {})", a.volume, mask_dims.x, mask_dims.y, mask_dims.z,
                                   a.signed_distance ? "signed" : "unsigned");
     return {};
@@ -143,7 +140,6 @@ std::string buildSeedInput(const ComputeArgs& a, const FieldRequest& field, cons
   if (std::string e = in->grid.validate(); !e.empty()) return e;
   if (std::string e = planField(field, in->grid, nullptr, &in->plan); !e.empty()) return e;
   if (std::string e = makePointSeeds(in->grid, points, &in->seeds); !e.empty()) return "--points: " + e;
-  in->closest_feature = "point";
   in->description = fmt::format("{} point{} in {}x{}x{}", points.size(), points.size() == 1 ? "" : "s", dims.x,
                                 dims.y, dims.z);
   return {};
@@ -278,7 +274,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   description.padding_voxels = in.padding.voxels;
   description.band_clipped = in.padding.band_clipped;
   description.segment_length_world = a.segment;
-  description.closest_feature = in.closest_feature;
+  description.closest_feature = std::string(in.plan.closestFeatureName());
   description.title = std::filesystem::path(!a.mesh.empty() ? a.mesh : a.volume).filename().string();
   FieldOutputs outputs(plan);
   if (std::string e = outputs.open(description); !e.empty()) return usage(e);

@@ -15,6 +15,14 @@ std::string_view FieldPlan::signName() const {
   return seeds == SeedKind::kVolume && inside_negative ? "mask-inside" : "unsigned";
 }
 
+std::string_view FieldPlan::closestFeatureName() const {
+  switch (seeds) {
+    case SeedKind::kMesh: return "triangle";
+    case SeedKind::kVolume: return "voxel";
+    default: return "point";
+  }
+}
+
 EngineOptions FieldPlan::engineOptions() const {
   EngineOptions o;
   o.mode = mode;

@@ -63,6 +63,8 @@ struct FieldPlan {
   }
   /// "pseudonormal", "winding", "parity", "mask-inside" or "unsigned".
   std::string_view signName() const;
+  /// What a voxel's closest-feature id names for these seeds: "triangle", "point" or "voxel" (Seeds::FeatureKind).
+  std::string_view closestFeatureName() const;
   double limitVoxels(const Grid& grid) const { return limit_world / grid.voxelSize(); }
   /// The engine's options (no interrupter, threads or chunking: those belong to the run, not the field).
   EngineOptions engineOptions() const;

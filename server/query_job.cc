@@ -116,8 +116,8 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
     // A tile: bricks move to the whole grid's coordinates; those of the halo (outside `deliver`, whole bricks since
     // both boxes are brick-aligned) are not sent. Order (z, y, x) is kept: the shift is the same for every brick.
     const Coord shift = query_.tile->window.min;
-    const Grid window = query_.engineGrid();
-    const bool voxel_ids = query_.closest == v1::CLOSEST_FEATURE_VOXEL;  // window indices -> the whole grid's
+    const Coord window = query_.engineGrid().dims();
+    const bool voxel_ids = closestOf(query_.plan) == v1::CLOSEST_FEATURE_VOXEL;  // window indices -> the whole grid's
     size_t kept = 0;
     for (Brick& b : chunk.bricks) {
       b.origin = b.origin + shift;
@@ -125,8 +125,7 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
       if (voxel_ids)
         for (int64_t& id : b.closest)
           if (id >= 0) {
-            const Coord d = window.dims();
-            const Coord c{int(id % d.x), int(id / d.x % d.y), int(id / (int64_t(d.x) * d.y))};
+            const Coord c{int(id % window.x), int(id / window.x % window.y), int(id / (int64_t(window.x) * window.y))};
             id = query_.grid.denseIndex(c + shift);
           }
       if (&chunk.bricks[kept] != &b) chunk.bricks[kept] = std::move(b);
@@ -135,6 +134,7 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
     chunk.bricks.resize(kept);
   }
   const v1::BrickEncoding enc = query_.encoding;
+  const v1::ClosestFeature closest = closestOf(query_.plan);
   const size_t n = chunk.bricks.size();
   // Batches: always at least one brick per message; a batch stops before exceeding the byte bound.
   struct Batch {
@@ -146,7 +146,7 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
     do {
       const Brick& b = chunk.bricks[i];
       const int count = b.mask.count();
-      const size_t need = encodedBrickBytes(count, enc, query_.closest);
+      const size_t need = encodedBrickBytes(count, enc, closest);
       if (batch.end > batch.begin && batch.bytes + need > query_.batch_bytes) break;
       batch.bytes += need;
       segment_voxels_ += uint64_t(count);
@@ -171,7 +171,7 @@ void QueryJob::emitChunk(SegmentBricks&& chunk) {
       batch->set_lower(chunk.lower_world);
       batch->set_upper(chunk.upper_world);
       batch->mutable_bricks()->Reserve(int(batches[k].end - batches[k].begin));
-      for (size_t i = batches[k].begin; i < batches[k].end; ++i) encodeBrick(chunk.bricks[i], enc, batch->add_bricks(), query_.closest);
+      for (size_t i = batches[k].begin; i < batches[k].end; ++i) encodeBrick(chunk.bricks[i], enc, batch->add_bricks(), closest);
       messages[k - w0] = std::move(msg);
     });
     for (size_t k = w0; k < w1; ++k)

@@ -343,13 +343,6 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
   fr.limit_voxels = r.limit_voxels();
   fr.segment_length_world = r.segment_length();
   fr.closest_features = r.closest_feature();
-  if (r.closest_feature()) {
-    switch (q.seed_kind) {
-      case SeedKind::kPoints: q.closest = v1::CLOSEST_FEATURE_POINT; break;
-      case SeedKind::kVolume: q.closest = v1::CLOSEST_FEATURE_VOXEL; break;
-      case SeedKind::kMesh: q.closest = v1::CLOSEST_FEATURE_TRIANGLE; break;
-    }
-  }
 
   q.batch_bytes = r.max_batch_bytes() == 0
                       ? options.batch_bytes
@@ -424,6 +417,15 @@ v1::Stencil stencilOf(const FieldPlan& plan) {
   }
 }
 
+v1::ClosestFeature closestOf(const FieldPlan& plan) {
+  if (!plan.closest_features) return v1::CLOSEST_FEATURE_NONE;
+  switch (plan.seeds) {
+    case SeedKind::kMesh: return v1::CLOSEST_FEATURE_TRIANGLE;
+    case SeedKind::kVolume: return v1::CLOSEST_FEATURE_VOXEL;
+    default: return v1::CLOSEST_FEATURE_POINT;
+  }
+}
+
 v1::PropagationMode modeOf(const FieldPlan& plan) {
   return plan.mode == PropagationMode::kPaper ? v1::PROPAGATION_MODE_PAPER : v1::PROPAGATION_MODE_EXACT;
 }
@@ -446,7 +448,7 @@ void fillQueryHeader(const ResolvedQuery& q, const std::string& query_id, v1::Qu
   h->set_query_id(query_id);
   h->set_sign_reason(q.plan.sign_reason);
   h->set_padding(uint32_t(q.padding.voxels));
-  h->set_closest_feature(q.closest);
+  h->set_closest_feature(closestOf(q.plan));
   h->set_expected_voxels(q.expected_voxels);
   h->set_algorithm(std::string(algorithmName(q.plan.algorithm)));
   h->set_band_clipped(q.padding.band_clipped);

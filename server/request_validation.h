@@ -40,7 +40,6 @@ struct ResolvedQuery {
   std::optional<TilePlan> tile;
   FieldPlan plan;                       ///< every choice made by core's planner (mode, stencil, sign, limit, ...)
   v1::BrickEncoding encoding = v1::BRICK_ENCODING_FLOAT32;  ///< never UNSPECIFIED
-  v1::ClosestFeature closest = v1::CLOSEST_FEATURE_NONE;    ///< what BrickData.closest carries (engine.closest_features)
   uint32_t batch_bytes = 1u << 20;
   uint64_t touched_voxels_bound = 0;    ///< BandExtent::voxelBound() of the seeds and limit
   uint64_t expected_voxels = 0;         ///< an estimate of the voxels delivered (QueryHeader.expected_voxels)
@@ -65,6 +64,8 @@ inline constexpr size_t kQueryChunkBricks = 1024;
 v1::SignMode signOf(const FieldPlan& plan);
 v1::Stencil stencilOf(const FieldPlan& plan);
 v1::PropagationMode modeOf(const FieldPlan& plan);
+/// What BrickData.closest carries for this plan (NONE unless it asks for closest features).
+v1::ClosestFeature closestOf(const FieldPlan& plan);
 
 /// The header message describing a resolved query (first message of the stream).
 void fillQueryHeader(const ResolvedQuery& query, const std::string& query_id, v1::QueryHeader* header);

@@ -258,7 +258,7 @@ v1::QueryRequest TiledQuery::tileRequest(const Tile& tile) const {
   r.set_segment_length(q.plan.segment_length_world);
   r.set_limit(q.plan.limit_world);
   r.set_max_batch_bytes(q.batch_bytes);
-  r.set_closest_feature(q.closest != v1::CLOSEST_FEATURE_NONE);
+  r.set_closest_feature(q.plan.closest_features);
   setBox(tile.plan.window, r.mutable_tile()->mutable_window());
   setBox(tile.plan.deliver, r.mutable_tile()->mutable_deliver());
   switch (q.seed_kind) {
@@ -461,7 +461,7 @@ void TiledQuery::forward(Tile& t, Message msg) {
     bricks->erase(keep, bricks->end());
     if (bricks->empty()) return;
   }
-  const bool point_ids = query_.closest == v1::CLOSEST_FEATURE_POINT;
+  const bool point_ids = closestOf(query_.plan) == v1::CLOSEST_FEATURE_POINT;
   for (v1::BrickData& b : *bricks) {
     t.forwarded.insert(brickKey(b));
     value_bytes_ += b.values().size() + b.mask().size() + b.closest().size();

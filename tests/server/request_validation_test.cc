@@ -432,7 +432,7 @@ TEST_F(ResolveQueryTest, DefaultsOfUnsetChoices) {
   EXPECT_EQ(modeOf(q.plan), v1::PROPAGATION_MODE_EXACT);
   EXPECT_EQ(q.plan.limit_world, kInf) << "limit 0 means no limit";
   EXPECT_EQ(q.plan.segment_length_world, 0);
-  EXPECT_EQ(q.closest, v1::CLOSEST_FEATURE_NONE);
+  EXPECT_EQ(closestOf(q.plan), v1::CLOSEST_FEATURE_NONE);
   EXPECT_EQ(q.batch_bytes, options.batch_bytes);
   EXPECT_EQ(q.plan.algorithm, FieldAlgorithm::kBand) << "the separable EDT is for volumes only";
 }
@@ -678,12 +678,12 @@ TEST_F(ResolveQueryTest, MeshGridIsFittedAroundTheMesh) {
 TEST_F(ResolveQueryTest, ClosestFeatureKindFollowsTheSeeds) {
   v1::QueryRequest points = pointsOnDims(), volume = inlineVolume(), mesh = inlineCube();
   for (v1::QueryRequest* r : {&points, &volume, &mesh}) {
-    EXPECT_EQ(resolveOk(*r).closest, v1::CLOSEST_FEATURE_NONE);
+    EXPECT_EQ(closestOf(resolveOk(*r).plan), v1::CLOSEST_FEATURE_NONE);
     r->set_closest_feature(true);
   }
-  EXPECT_EQ(resolveOk(points).closest, v1::CLOSEST_FEATURE_POINT);
-  EXPECT_EQ(resolveOk(volume).closest, v1::CLOSEST_FEATURE_VOXEL);
-  EXPECT_EQ(resolveOk(mesh).closest, v1::CLOSEST_FEATURE_TRIANGLE);
+  EXPECT_EQ(closestOf(resolveOk(points).plan), v1::CLOSEST_FEATURE_POINT);
+  EXPECT_EQ(closestOf(resolveOk(volume).plan), v1::CLOSEST_FEATURE_VOXEL);
+  EXPECT_EQ(closestOf(resolveOk(mesh).plan), v1::CLOSEST_FEATURE_TRIANGLE);
   EXPECT_TRUE(resolveOk(points).plan.closest_features);
 }
 
