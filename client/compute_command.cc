@@ -255,10 +255,8 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   options.threads = a.threads;
   if (std::string e = validateOptions(in.grid, options); !e.empty()) return usage(e);
   if (in.padding.band_clipped)
-    ctx.err << fmt::format("distband compute: warning: the band is clipped at the grid's faces: padding {} voxels < "
-                           "limit {:g} voxels{}\n",
-                           in.padding.voxels, limit / in.grid.voxelSize(),
-                           a.padding >= 0 ? " (--padding)" : "; give a larger --resolution or --padding");
+    ctx.err << "distband compute: " << clippedBandWarning(in.padding.voxels, limit / in.grid.voxelSize(), a.padding >= 0)
+            << "\n";
 
   const StencilKind stencil = in.plan.stencil;
   FieldDescription description;

@@ -41,6 +41,12 @@ void addOutputFlags(CLI::App* cmd, OutputFlags* f) {
   cmd->add_option("--isosurface", f->isosurface, "D OBJ - the surface at distance D as a Wavefront OBJ")->expected(2);
 }
 
+std::string clippedBandWarning(int padding_voxels, double limit_voxels, bool padding_given) {
+  return fmt::format("warning: the band is clipped at the grid's faces: padding {} voxels < limit {:g} voxels{}",
+                     padding_voxels, limit_voxels,
+                     padding_given ? " (--padding)" : "; give a larger --resolution or --padding");
+}
+
 std::string checkOutputFlags(const OutputFlags& f, double limit_world, OutputPlan* plan) {
   if (f.out.empty() && f.npy.empty() && f.slice_png.empty() && f.isosurface.empty())
     return "nothing to write: give --out (or --npy, --slice-png, --isosurface)";
@@ -229,8 +235,7 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
     meta.data_file = std::filesystem::path(field_file).filename().string();
     meta.signed_distance = field_.signed_distance;
     meta.limit_world = field_.limit_world;
-    meta.background_world =
-        std::isfinite(field_.limit_world) ? field_.limit_world : std::numeric_limits<double>::infinity();
+    meta.background_world = field_.limit_world;  // +infinity without a limit
     meta.stencil = field_.stencil;
     meta.mode = field_.mode;
     meta.sign = field_.sign;

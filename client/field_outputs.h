@@ -47,6 +47,9 @@ struct OutputFlags {
 /// Registers --out, --npy, --meta, --closest, --slice-png and --isosurface on a command (compute and query).
 void addOutputFlags(CLI::App* command, OutputFlags* flags);
 
+/// The warning both commands print when the grid's padding is below the limit (GridPadding::band_clipped).
+std::string clippedBandWarning(int padding_voxels, double limit_voxels, bool padding_given);
+
 /// What checkOutputFlags() parsed.
 struct OutputPlan {
   OutputFlags flags;

@@ -79,7 +79,10 @@ std::string describe(const grpc::Status& s) {
 }
 
 template <typename Enum>
-bool pick(const std::string& text, std::initializer_list<std::pair<const char*, Enum>> table, Enum* out) {
+using NameTable = std::initializer_list<std::pair<const char*, Enum>>;
+
+template <typename Enum>
+bool pick(const std::string& text, NameTable<Enum> table, Enum* out) {
   for (const auto& [name, value] : table)
     if (text == name) {
       *out = value;
@@ -88,24 +91,21 @@ bool pick(const std::string& text, std::initializer_list<std::pair<const char*, 
   return false;
 }
 
-std::string signName(v1::SignMode sign) {
-  switch (sign) {
-    case v1::SIGN_MODE_PSEUDONORMAL: return "pseudonormal";
-    case v1::SIGN_MODE_WINDING: return "winding";
-    case v1::SIGN_MODE_PARITY: return "parity";
-    case v1::SIGN_MODE_MASK_INSIDE: return "mask-inside";
-    default: return "unsigned";
-  }
+/// The flag's name of a value the header reports (the first name in the table that maps to it).
+template <typename Enum>
+std::string nameOf(Enum value, NameTable<Enum> table) {
+  for (const auto& [name, v] : table)
+    if (v == value) return name;
+  return "?";
 }
 
-std::string stencilText(v1::Stencil stencil) {
-  switch (stencil) {
-    case v1::STENCIL_CUBIC6: return "cubic6";
-    case v1::STENCIL_CUBIC18: return "cubic18";
-    case v1::STENCIL_FCC12: return "fcc12";
-    default: return "cubic26";
-  }
-}
+// The names --stencil and --sign take, read both ways (flag -> request, header -> what the CLI prints).
+const NameTable<v1::Stencil> kStencilNames = {{"auto", v1::STENCIL_UNSPECIFIED}, {"cubic6", v1::STENCIL_CUBIC6},
+                                              {"cubic18", v1::STENCIL_CUBIC18}, {"cubic26", v1::STENCIL_CUBIC26},
+                                              {"fcc12", v1::STENCIL_FCC12}};
+const NameTable<v1::SignMode> kSignNames = {
+    {"auto", v1::SIGN_MODE_AUTO},       {"unsigned", v1::SIGN_MODE_UNSIGNED}, {"pseudonormal", v1::SIGN_MODE_PSEUDONORMAL},
+    {"winding", v1::SIGN_MODE_WINDING}, {"parity", v1::SIGN_MODE_PARITY},     {"mask-inside", v1::SIGN_MODE_MASK_INSIDE}};
 
 std::string closestText(v1::ClosestFeature closest) {
   switch (closest) {
@@ -181,9 +181,7 @@ std::string buildRequest(const QueryArgs& a, RemoteClient& client, const CliCont
     setVec(g->mutable_box()->mutable_max(), hi);
   }
   v1::Stencil stencil;
-  if (!pick(a.stencil, {{"auto", v1::STENCIL_UNSPECIFIED}, {"cubic6", v1::STENCIL_CUBIC6},
-                        {"cubic18", v1::STENCIL_CUBIC18}, {"cubic26", v1::STENCIL_CUBIC26},
-                        {"fcc12", v1::STENCIL_FCC12}}, &stencil))
+  if (!pick(a.stencil, kStencilNames, &stencil))
     return fmt::format("--stencil '{}': expected auto, cubic6, cubic18, cubic26 or fcc12", a.stencil);
   r->set_stencil(stencil);
   v1::PropagationMode mode;
@@ -193,9 +191,7 @@ std::string buildRequest(const QueryArgs& a, RemoteClient& client, const CliCont
   r->set_mode(mode);
   if (!a.sign.empty()) {
     v1::SignMode sign;
-    if (!pick(a.sign, {{"auto", v1::SIGN_MODE_AUTO}, {"unsigned", v1::SIGN_MODE_UNSIGNED},
-                       {"pseudonormal", v1::SIGN_MODE_PSEUDONORMAL}, {"winding", v1::SIGN_MODE_WINDING},
-                       {"parity", v1::SIGN_MODE_PARITY}, {"mask-inside", v1::SIGN_MODE_MASK_INSIDE}}, &sign))
+    if (!pick(a.sign, kSignNames, &sign))
       return fmt::format("--sign '{}': expected auto, pseudonormal, winding, parity, unsigned or mask-inside", a.sign);
     r->set_sign(sign);
   }
@@ -262,20 +258,18 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
     if (h.algorithm() == "separable")
       ctx.out << "algorithm: separable (a seed volume over the whole grid: an exact separable EDT; the first segment "
                  "arrives once the whole field is known)\n";
-    const std::string sign = signName(h.sign());
+    const std::string sign = nameOf(h.sign(), kSignNames);
     if (h.sign() != v1::SIGN_MODE_UNSIGNED || h.sign_reason().rfind("auto", 0) == 0)
       ctx.out << fmt::format("sign: {} ({})\n", sign, h.sign_reason());
     if (h.band_clipped())
-      ctx.err << fmt::format("distband query: warning: the band is clipped at the grid's faces: padding {} voxels < "
-                             "limit {:g} voxels{}\n",
-                             h.padding(), h.limit() / grid.voxelSize(),
-                             a.padding >= 0 ? " (--padding)" : "; give a larger --resolution or --padding");
+      ctx.err << "distband query: " << clippedBandWarning(int(h.padding()), h.limit() / grid.voxelSize(), a.padding >= 0)
+              << "\n";
     FieldDescription field;
     field.grid = grid;
     field.limit_world = h.limit();
     field.signed_distance = h.signed_();
     field.sign_from_band = h.signed_();  // no inside labels on the client: signs come from the delivered band
-    field.stencil = stencilText(h.stencil());
+    field.stencil = nameOf(h.stencil(), kStencilNames);
     field.mode = h.mode() == v1::PROPAGATION_MODE_PAPER ? "paper" : "exact";
     if (h.signed_()) field.sign = sign;
     field.sign_reason = h.sign_reason();
