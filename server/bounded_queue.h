@@ -1,8 +1,8 @@
 // BoundedQueue: the hand-off between a query's compute thread and its gRPC writer, bounded in bytes so that a
 // slow client pauses compute instead of growing memory.
 // Contract: push() blocks while the item would take the queue beyond its capacity in bytes (an item is always
-// admitted into an empty queue, whatever its size) and returns false once the queue is closed. pop() waits up to a timeout. close()
-// wakes every waiter; after it, push() refuses and pop() drains what is left, then reports kClosed.
+// admitted into an empty queue, whatever its size) and returns false once the queue is closed. pop() waits up to a
+// timeout. close() wakes every waiter; after it, push() refuses and pop() drains what is left, then reports kClosed.
 // Thread-safe for any number of producers and consumers.
 #pragma once
 

@@ -21,6 +21,7 @@ struct VdbFieldBuilder::Impl {
   explicit Impl(openvdb::FloatGrid::Ptr g) : grid(std::move(g)), accessor(grid->getAccessor()) {}
   openvdb::Int32Grid::Ptr closest32;  // at most one of the two
   openvdb::Int64Grid::Ptr closest64;
+  void addClosestIds(const Brick& brick);  // into whichever closest grid there is
 };
 
 VdbFieldBuilder::VdbFieldBuilder(const Grid& grid, float background) {
@@ -62,10 +63,6 @@ void fillLeaf(Leaf* leaf, const Brick& brick) {
   }
 }
 
-}  // namespace
-
-namespace {
-
 // The brick's closest-feature ids, set active at its masked voxels (touches the tree: one thread).
 template <typename IntGrid>
 void addClosest(IntGrid& grid, const Brick& brick) {
@@ -88,6 +85,11 @@ typename IntGrid::Ptr makeClosestGrid(const openvdb::FloatGrid& distance) {
 
 }  // namespace
 
+void VdbFieldBuilder::Impl::addClosestIds(const Brick& brick) {
+  if (closest32) addClosest(*closest32, brick);
+  if (closest64) addClosest(*closest64, brick);
+}
+
 void VdbFieldBuilder::addClosestGrid(bool wide) {
   if (wide) impl_->closest64 = makeClosestGrid<openvdb::Int64Grid>(*impl_->grid);
   else impl_->closest32 = makeClosestGrid<openvdb::Int32Grid>(*impl_->grid);
@@ -96,8 +98,7 @@ void VdbFieldBuilder::addClosestGrid(bool wide) {
 void VdbFieldBuilder::add(const Brick& brick) {
   if (brick.mask.empty()) return;
   fillLeaf(impl_->accessor.touchLeaf(openvdb::Coord(brick.origin.x, brick.origin.y, brick.origin.z)), brick);
-  if (impl_->closest32) addClosest(*impl_->closest32, brick);
-  if (impl_->closest64) addClosest(*impl_->closest64, brick);
+  impl_->addClosestIds(brick);
 }
 
 void VdbFieldBuilder::add(const SegmentBricks& segment) {
@@ -112,10 +113,7 @@ void VdbFieldBuilder::add(const SegmentBricks& segment) {
     for (size_t i = r.begin(); i != r.end(); ++i)
       if (leaves[i]) fillLeaf(leaves[i], segment.bricks[i]);
   });
-  for (const Brick& b : segment.bricks) {
-    if (impl_->closest32) addClosest(*impl_->closest32, b);
-    if (impl_->closest64) addClosest(*impl_->closest64, b);
-  }
+  for (const Brick& b : segment.bricks) impl_->addClosestIds(b);
 }
 
 void VdbFieldBuilder::finish() {
