@@ -280,7 +280,9 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   ctx.out << fmt::format("distband compute: {}, voxel size {:g}, {}, mode {}, segment {}, limit {}, threads {}\n",
                          in.description, in.grid.voxelSize(),
                          in.plan.algorithm == FieldAlgorithm::kSeparable
-                             ? std::string("algorithm separable (whole-grid volume: exact separable EDT)")
+                             ? std::string(std::isfinite(limit)
+                                               ? "algorithm separable (exact EDT over the bricks within the limit)"
+                                               : "algorithm separable (exact EDT over the whole grid)")
                              : fmt::format("stencil {}", stencilName(stencil)),
                          modeName(options.mode),
                          a.segment > 0 ? fmt::format("{:g}", a.segment) : std::string("none"),

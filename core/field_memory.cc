@@ -21,6 +21,7 @@ constexpr double kMeshBytesPerTriangle = 400;   // index-space triangles, normal
 constexpr double kMeshBytesPerBandVoxel = 80;   // scan candidates, band list, paper-mode site points
 constexpr double kMeshBandVoxelsPerArea = 3.5;      // 2 x 1.5 voxels, plus lattice effects
 constexpr double kMeshBandVoxelsPerTriangle = 8;    // the band's rounded ends, counted per triangle
+constexpr double kSeparableBytesPerBandBrick = 96;  // pool pointer, run lists, segment ranges, output order
 constexpr double kSafety = 1.15;                // allocator slack on top of the measured sizes
 constexpr uint64_t kFixedBytes = uint64_t(8) << 20;  // per-run constants (thread buffers, arena)
 
@@ -61,8 +62,14 @@ FieldMemoryEstimate estimateFieldMemory(const FieldMemoryInput& in) {
       break;
     }
   }
-  if (in.separable) {  // squared distances per grid voxel (twice when signed), segment lists per brick; no seeds
-    engine = double(in.grid_voxels) * (in.signed_volume ? 8 : 4) + double(in.grid_voxels) / kBrickVoxels * 24;
+  if (in.separable) {  // no seeds and no band state
+    const double sides = in.signed_volume ? 2 : 1;  // signed: the outside's and the inside's squared distances
+    if (in.touched_voxels < in.grid_voxels)
+      // Within a limit: 4 bytes per voxel of the bricks the passes visit (inside the touched bound: the boundary's
+      // bricks grown by the limit), their run lists, and a byte per grid brick for the mask's classification.
+      engine = touched * 4 * sides + touched_bricks * kSeparableBytesPerBandBrick + double(in.grid_voxels) / kBrickVoxels;
+    else  // whole grid: squared distances per grid voxel, segment lists per brick
+      engine = double(in.grid_voxels) * 4 * sides + double(in.grid_voxels) / kBrickVoxels * 24;
     seeds = 0;
   }
   const double chunk_bricks = in.chunk_bricks ? std::min(double(in.chunk_bricks), touched_bricks) : touched_bricks;

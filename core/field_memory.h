@@ -38,7 +38,9 @@ struct FieldMemoryInput {
   /// the estimate bounds by the touched voxels.
   uint64_t chunk_bricks = 0;
   bool closest_features = false;  ///< EngineOptions::closest_features: 4 KiB more per output brick
-  bool separable = false;  ///< FieldAlgorithm::kSeparable: 4 bytes per grid voxel (8 signed), no band state
+  /// FieldAlgorithm::kSeparable: no band state; 4 bytes (8 signed) per grid voxel, or with a limit (touched_voxels
+  /// below the grid's) per touched voxel.
+  bool separable = false;
 };
 
 struct FieldMemoryEstimate {

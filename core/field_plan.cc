@@ -71,10 +71,11 @@ std::string planField(const FieldRequest& r, const Grid& grid, const MeshReport*
   p.segment_length_world = r.segment_length_world;
   p.closest_features = r.closest_features;
   p.second_ring = r.second_ring;
-  // A whole-grid volume field is what a separable EDT computes fastest (docs/benchmarks.md, edt_peer_bench); a
-  // stencil or paper mode asks for the band itself, and closest features come from the band's sites.
-  if (r.seeds == SeedKind::kVolume && !std::isfinite(p.limit_world) && p.mode == PropagationMode::kExact &&
-      !r.stencil && !r.closest_features && !r.second_ring)
+  // A volume's exact field is what a separable EDT computes fastest, over the whole grid or, with a limit, over the
+  // bricks within it (docs/benchmarks.md, edt_peer_bench); a stencil or paper mode asks for the propagation itself,
+  // and closest features come from the propagation's sites.
+  if (r.seeds == SeedKind::kVolume && p.mode == PropagationMode::kExact && !r.stencil && !r.closest_features &&
+      !r.second_ring)
     p.algorithm = FieldAlgorithm::kSeparable;
   *out = std::move(p);
   return {};

@@ -25,8 +25,9 @@ namespace distband {
 
 enum class SeedKind { kPoints, kVolume, kMesh };
 
-/// How the field is computed: the active band (any seeds, any limit), or, for a seed volume over the whole grid
-/// (no limit), the separable exact EDT (core/separable_edt.h), several times faster there.
+/// How the field is computed: the active band's propagation (any seeds), or, for a seed volume in exact mode, the
+/// separable exact EDT (core/separable_edt.h: over the whole grid, or over the bricks within the limit), several
+/// times faster there and exact.
 enum class FieldAlgorithm { kBand, kSeparable };
 std::string_view algorithmName(FieldAlgorithm algorithm);  ///< "band", "separable"
 

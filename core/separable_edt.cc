@@ -10,13 +10,15 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "core/separable_band.h"
+#include "core/separable_lines.h"
 #include "core/seeds/volume_seeds.h"
 #include "core/thread_arena.h"
 
 namespace distband {
 namespace {
 
-constexpr uint32_t kFar = std::numeric_limits<uint32_t>::max();  // no seed on this line (yet)
+constexpr uint32_t kFar = kFarSquared;  // no seed on this line (yet)
 
 // Pass 1, along x: each voxel's squared distance to the nearest seed of its row, by two sweeps.
 void rowPass(const uint8_t* mask, bool seeds_nonzero, uint32_t* out, int n) {
@@ -29,37 +31,6 @@ void rowPass(const uint8_t* mask, bool seeds_nonzero, uint32_t* out, int n) {
   for (int x = n - 1; x >= 0; --x) {
     if ((mask[x] != 0) == seeds_nonzero) last = x;
     if (last >= 0) out[x] = std::min<uint32_t>(out[x], uint32_t((last - x) * (last - x)));
-  }
-}
-
-// Passes 2 and 3: d[q] = min_p f[p] + (q - p)², the lower envelope of the parabolas rooted at the finite f[p]
-// (Felzenszwalb & Huttenlocher). `v` and `z` are scratch of n and n + 1 entries.
-void parabolaPass(const uint32_t* f, uint32_t* d, int n, int* v, double* z) {
-  int k = -1;
-  for (int q = 0; q < n; ++q) {
-    if (f[q] == kFar) continue;
-    const int64_t fq = int64_t(f[q]) + int64_t(q) * q;
-    double s = -std::numeric_limits<double>::infinity();
-    while (k >= 0) {
-      const int p = v[k];
-      s = double(fq - (int64_t(f[p]) + int64_t(p) * p)) / (2.0 * (q - p));
-      if (s > z[k]) break;
-      --k;
-    }
-    ++k;
-    v[k] = q;
-    z[k] = k == 0 ? -std::numeric_limits<double>::infinity() : s;
-    z[k + 1] = std::numeric_limits<double>::infinity();
-  }
-  if (k < 0) {
-    std::fill(d, d + n, kFar);
-    return;
-  }
-  int j = 0;
-  for (int q = 0; q < n; ++q) {
-    while (z[j + 1] < q) ++j;
-    const int64_t dq = int64_t(q - v[j]);
-    d[q] = uint32_t(dq * dq + f[v[j]]);
   }
 }
 
@@ -84,7 +55,7 @@ bool squaredDistances(const Coord& dims, const std::vector<uint8_t>& mask, bool 
       for (int y = 0; y < ny; ++y) rowPass(m + size_t(y) * nx, seeds_nonzero, s + size_t(y) * nx, nx);
       for (int x = 0; x < nx; ++x) {
         for (int y = 0; y < ny; ++y) col[size_t(y)] = s[size_t(y) * nx + x];
-        parabolaPass(col.data(), res.data(), ny, v.data(), zz.data());
+        parabolaEnvelope(col.data(), res.data(), ny, v.data(), zz.data());
         for (int y = 0; y < ny; ++y) s[size_t(y) * nx + x] = res[size_t(y)];
       }
     }
@@ -106,7 +77,7 @@ bool squaredDistances(const Coord& dims, const std::vector<uint8_t>& mask, bool 
           for (int i = 0; i < w; ++i) cols[size_t(i) * nz + z] = row[i];
         }
         for (int i = 0; i < w; ++i) {
-          parabolaPass(cols.data() + size_t(i) * nz, res.data(), nz, v.data(), zz.data());
+          parabolaEnvelope(cols.data() + size_t(i) * nz, res.data(), nz, v.data(), zz.data());
           std::copy(res.begin(), res.end(), cols.begin() + ptrdiff_t(size_t(i) * nz));
         }
         for (int z = 0; z < nz; ++z) {
@@ -119,6 +90,158 @@ bool squaredDistances(const Coord& dims, const std::vector<uint8_t>& mask, bool 
   return !isInterrupted(interrupter);
 }
 
+/// Streams a field given brick by brick, under the engine's contract (segments nearest first, bricks in (z, y, x)
+/// order, chunks). `Source` lists bricks in that order: count(), origin(i), and value(i, offset, voxel, &d), true
+/// when the voxel is delivered with signed distance d (voxels). False when interrupted.
+template <typename Source>
+bool emitSegments(const Grid& grid, const EngineOptions& options, const Source& source, EngineResult* result,
+                  const SegmentCallback& on_segment) {
+  using Clock = std::chrono::steady_clock;
+  const Interrupter* interrupter = options.interrupter;
+  const double h = grid.voxelSize();
+  // |distance| in voxels, and its segment: (i L, (i + 1) L], segment 0 including 0 (one segment when L = 0).
+  const double length = options.segment_length_world > 0 ? options.segment_length_world / h : 0;
+  auto segmentOf = [&](double d) { return length > 0 && d > length ? int(std::ceil(d / length)) - 1 : 0; };
+  constexpr int kNone = std::numeric_limits<int>::max();
+  // Each brick's segment range (kNone: nothing delivered), then the bricks of every segment in (z, y, x) order.
+  const size_t bricks = source.count();
+  std::vector<int> first(bricks), last(bricks);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, bricks, 64), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t b = r.begin(); b != r.end(); ++b) {
+      if ((b & 63) == 0 && isInterrupted(interrupter)) return;
+      const Coord origin = source.origin(b);
+      int lo = kNone, hi = -1;
+      for (int off = 0; off < kBrickVoxels; ++off) {
+        double d;
+        if (!source.value(b, off, origin + brickLocal(off), &d)) continue;
+        const int s = segmentOf(std::abs(d));
+        lo = std::min(lo, s);
+        hi = std::max(hi, s);
+        if (length == 0) break;  // one segment: a voxel is enough
+      }
+      first[b] = lo;
+      last[b] = hi;
+    }
+  });
+  if (isInterrupted(interrupter)) return false;
+  int segments = 1;
+  for (int hi : last) segments = std::max(segments, hi + 1);
+  std::vector<std::vector<uint32_t>> by_segment(static_cast<size_t>(segments));
+  for (size_t b = 0; b < bricks; ++b)
+    for (int s = first[b]; s <= last[b]; ++s) by_segment[size_t(s)].push_back(uint32_t(b));
+  std::vector<int>().swap(first);
+  std::vector<int>().swap(last);
+
+  const size_t per_chunk = options.max_chunk_bricks ? options.max_chunk_bricks : std::numeric_limits<size_t>::max();
+  for (int s = 0; s < segments; ++s) {
+    const auto ts = Clock::now();
+    SegmentStats stats;
+    stats.index = s;
+    stats.lower_world = length > 0 ? s * length * h : 0;
+    stats.upper_world = std::min(length > 0 ? (s + 1) * length * h : std::numeric_limits<double>::infinity(),
+                                 options.limit_world);
+    const std::vector<uint32_t>& list = by_segment[size_t(s)];
+    SegmentBricks whole;
+    for (size_t c0 = 0; c0 < list.size() || c0 == 0;) {
+      if (isInterrupted(interrupter)) return false;
+      const size_t c1 = std::min(list.size(), c0 + std::min<size_t>(per_chunk, 8192));
+      std::vector<Brick> part(c1 - c0);
+      tbb::parallel_for(c0, c1, [&](size_t i) {
+        const size_t b = list[i];
+        Brick& brick = part[i - c0];
+        brick.origin = source.origin(b);
+        for (int off = 0; off < kBrickVoxels; ++off) {
+          double d;
+          if (!source.value(b, off, brick.origin + brickLocal(off), &d) || segmentOf(std::abs(d)) != s) continue;
+          brick.values[off] = float(d * h);
+          brick.mask.set(off);
+        }
+      });
+      // A brick spanning segments s-1..s+1 may hold none of segment s: only bricks with voxels are delivered.
+      part.erase(std::remove_if(part.begin(), part.end(), [](const Brick& b) { return b.mask.empty(); }), part.end());
+      for (const Brick& b : part) stats.voxels += b.mask.count();
+      stats.bricks += int64_t(part.size());
+      const bool done = c1 >= list.size();
+      if (options.max_chunk_bricks) {
+        SegmentBricks p;
+        p.index = s;
+        p.lower_world = stats.lower_world;
+        p.upper_world = stats.upper_world;
+        p.complete = done;
+        p.last = done && s + 1 == segments;
+        p.bricks = std::move(part);
+        if (on_segment) on_segment(std::move(p));
+      } else {
+        whole.bricks.insert(whole.bricks.end(), std::make_move_iterator(part.begin()),
+                            std::make_move_iterator(part.end()));
+      }
+      if (done) break;
+      c0 = c1;
+    }
+    if (!options.max_chunk_bricks) {
+      whole.index = s;
+      whole.lower_world = stats.lower_world;
+      whole.upper_world = stats.upper_world;
+      whole.last = s + 1 == segments;
+      if (on_segment) on_segment(std::move(whole));
+    }
+    std::vector<uint32_t>().swap(by_segment[size_t(s)]);
+    stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
+    result->voxels += stats.voxels;
+    result->segments.push_back(stats);
+  }
+  return true;
+}
+
+/// The whole grid: every voxel, from dense squared distances.
+struct WholeGridSource {
+  const Grid& grid;
+  const std::vector<uint8_t>& mask;
+  bool inside_negative;
+  const std::vector<uint32_t>& outside;
+  const std::vector<uint32_t>& inside;
+  Coord bd = grid.brickDims();
+  size_t count() const { return size_t(bd.x) * bd.y * bd.z; }
+  Coord origin(size_t b) const {
+    return {int(b % bd.x) * kBrickSize, int(b / bd.x % bd.y) * kBrickSize, int(b / (size_t(bd.x) * bd.y)) * kBrickSize};
+  }
+  bool value(size_t, int, const Coord& c, double* d) const {
+    if (!grid.contains(c)) return false;
+    const size_t v = size_t(grid.denseIndex(c));
+    const bool in = inside_negative && mask[v];
+    *d = in ? -std::sqrt(double(inside[v])) : std::sqrt(double(outside[v]));
+    return true;
+  }
+};
+
+/// The voxels within the limit, from the separable band's bricks: outside (non-mask) voxels from `outside`; mask
+/// voxels 0, or (signed) minus their distance from `inside`.
+struct BandSource {
+  const Grid& grid;
+  const std::vector<uint8_t>& mask;
+  bool inside_negative;
+  uint32_t cut2;
+  std::vector<uint64_t> keys;                       // the union of the listed bricks, ascending
+  std::vector<const uint32_t*> outside, inside;     // their squared distances, or null
+  Coord bd = grid.brickDims();
+  size_t count() const { return keys.size(); }
+  Coord origin(size_t i) const {
+    const uint64_t b = keys[i];
+    return {int(b % uint64_t(bd.x)) * kBrickSize, int(b / uint64_t(bd.x) % uint64_t(bd.y)) * kBrickSize,
+            int(b / (uint64_t(bd.x) * uint64_t(bd.y))) * kBrickSize};
+  }
+  bool value(size_t i, int off, const Coord& c, double* d) const {
+    if (!grid.contains(c)) return false;
+    if (mask[size_t(grid.denseIndex(c))]) {
+      if (!inside_negative) return *d = 0, true;
+      if (!inside[i] || inside[i][off] > cut2) return false;
+      return *d = -std::sqrt(double(inside[i][off])), true;
+    }
+    if (!outside[i] || outside[i][off] > cut2) return false;
+    return *d = std::sqrt(double(outside[i][off])), true;
+  }
+};
+
 }  // namespace
 
 EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uint8_t>& mask, bool inside_negative,
@@ -127,115 +250,51 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
   if (int64_t(mask.size()) != grid.voxelCount())
     throw std::invalid_argument(fmt::format("the mask has {} bytes, the grid {} voxels", mask.size(), grid.voxelCount()));
   if (std::string e = checkSeedMask(mask, inside_negative); !e.empty()) throw std::invalid_argument(e);
+  if (!(options.limit_world > 0)) throw std::invalid_argument(fmt::format("limit must be > 0 (got {})", options.limit_world));
   EngineResult result;
   auto body = [&] {
-    using Clock = std::chrono::steady_clock;
-    const auto t0 = Clock::now();
+    const auto t0 = std::chrono::steady_clock::now();
     const Interrupter* interrupter = options.interrupter;
     const Coord dims = grid.dims();
-    std::vector<uint32_t> outside, inside;  // squared distances (voxels) to the mask, and (signed) to its outside
-    if (!squaredDistances(dims, mask, true, interrupter, &outside) ||
-        (inside_negative && !squaredDistances(dims, mask, false, interrupter, &inside))) {
-      result.interrupted = true;
-      return;
-    }
-    // |distance| in voxels, and its segment: (i L, (i + 1) L], segment 0 including 0 (one segment when L = 0).
-    const double h = grid.voxelSize();
-    const double length = options.segment_length_world > 0 ? options.segment_length_world / h : 0;
-    auto distanceOf = [&](size_t i) {
-      return std::sqrt(double(inside_negative && mask[i] ? inside[i] : outside[i]));
-    };
-    auto segmentOf = [&](double d) { return length > 0 && d > length ? int(std::ceil(d / length)) - 1 : 0; };
-    // Each brick's segment range, then the bricks of every segment in (z, y, x) order.
-    const Coord bd = grid.brickDims();
-    const size_t bricks = size_t(bd.x) * bd.y * bd.z;
-    std::vector<int> first(bricks), last(bricks);
-    tbb::parallel_for(size_t(0), bricks, [&](size_t b) {
-      const Coord origin{int(b % bd.x) * kBrickSize, int(b / bd.x % bd.y) * kBrickSize,
-                         int(b / (size_t(bd.x) * bd.y)) * kBrickSize};
-      int lo = std::numeric_limits<int>::max(), hi = 0;
-      for (int z = origin.z; z < std::min(origin.z + kBrickSize, dims.z); ++z)
-        for (int y = origin.y; y < std::min(origin.y + kBrickSize, dims.y); ++y)
-          for (int x = origin.x; x < std::min(origin.x + kBrickSize, dims.x); ++x) {
-            const int s = segmentOf(distanceOf(size_t(grid.denseIndex({x, y, z}))));
-            lo = std::min(lo, s);
-            hi = std::max(hi, s);
-          }
-      first[b] = lo;
-      last[b] = hi;
-    });
-    const int segments = 1 + *std::max_element(last.begin(), last.end());
-    std::vector<std::vector<uint32_t>> by_segment(static_cast<size_t>(segments));
-    for (size_t b = 0; b < bricks; ++b)
-      for (int s = first[b]; s <= last[b]; ++s) by_segment[size_t(s)].push_back(uint32_t(b));
-    std::vector<int>().swap(first);
-    std::vector<int>().swap(last);
-
-    const size_t per_chunk = options.max_chunk_bricks ? options.max_chunk_bricks : std::numeric_limits<size_t>::max();
-    for (int s = 0; s < segments; ++s) {
-      const auto ts = Clock::now();
-      SegmentStats stats;
-      stats.index = s;
-      stats.lower_world = length > 0 ? s * length * h : 0;
-      stats.upper_world = length > 0 ? (s + 1) * length * h : std::numeric_limits<double>::infinity();
-      const std::vector<uint32_t>& list = by_segment[size_t(s)];
-      SegmentBricks whole;
-      for (size_t c0 = 0; c0 < list.size() || c0 == 0;) {
-        if (isInterrupted(interrupter)) {
-          result.interrupted = true;
-          return;
+    bool ok = false;
+    if (std::isinf(options.limit_world)) {
+      std::vector<uint32_t> outside, inside;  // squared distances (voxels) to the mask, and (signed) to its outside
+      ok = squaredDistances(dims, mask, true, interrupter, &outside) &&
+           (!inside_negative || squaredDistances(dims, mask, false, interrupter, &inside)) &&
+           emitSegments(grid, options, WholeGridSource{grid, mask, inside_negative, outside, inside}, &result,
+                        on_segment);
+    } else {
+      // Delivered: squared distance <= limit^2 (voxels), an integer bound on the integer squared distances.
+      const double limit = options.limit_world / grid.voxelSize();
+      const uint32_t cut2 = uint32_t(std::min(std::floor(limit * limit), double(uint32_t(1) << 31)));
+      const std::vector<uint8_t> kinds = classifyMaskBricks(dims, mask, interrupter);
+      SquaredBricks outside, inside;
+      ok = !isInterrupted(interrupter) &&
+           squaredDistancesWithin(dims, mask, kinds, true, cut2, interrupter, &outside) &&
+           (!inside_negative || squaredDistancesWithin(dims, mask, kinds, false, cut2, interrupter, &inside));
+      if (ok) {
+        BandSource source{grid, mask, inside_negative, cut2, {}, {}, {}};
+        // Unsigned, every mask voxel is delivered (distance 0): the bricks holding one join the outside's.
+        std::vector<uint64_t> keys = outside.keys;
+        keys.insert(keys.end(), inside.keys.begin(), inside.keys.end());
+        if (!inside_negative)
+          for (size_t b = 0; b < kinds.size(); ++b)
+            if (kinds[b] != 0) keys.push_back(b);
+        std::sort(keys.begin(), keys.end());
+        keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+        source.outside.reserve(keys.size());
+        source.inside.reserve(keys.size());
+        for (uint64_t k : keys) {
+          source.outside.push_back(outside.find(k));
+          source.inside.push_back(inside.find(k));
         }
-        const size_t c1 = std::min(list.size(), c0 + std::min<size_t>(per_chunk, 8192));
-        std::vector<Brick> part(c1 - c0);
-        tbb::parallel_for(c0, c1, [&](size_t i) {
-          const size_t b = list[i];
-          Brick& brick = part[i - c0];
-          brick.origin = {int(b % bd.x) * kBrickSize, int(b / bd.x % bd.y) * kBrickSize,
-                          int(b / (size_t(bd.x) * bd.y)) * kBrickSize};
-          for (int off = 0; off < kBrickVoxels; ++off) {
-            const Coord c = brick.origin + brickLocal(off);
-            if (!grid.contains(c)) continue;
-            const size_t v = size_t(grid.denseIndex(c));
-            const double d = distanceOf(v);
-            if (segmentOf(d) != s) continue;
-            brick.values[off] = float(inside_negative && mask[v] ? -d * h : d * h);
-            brick.mask.set(off);
-          }
-        });
-        // A brick spanning segments s-1..s+1 may hold none of segment s: only bricks with voxels are delivered.
-        part.erase(std::remove_if(part.begin(), part.end(), [](const Brick& b) { return b.mask.empty(); }), part.end());
-        for (const Brick& b : part) stats.voxels += b.mask.count();
-        stats.bricks += int64_t(part.size());
-        const bool done = c1 >= list.size();
-        if (options.max_chunk_bricks) {
-          SegmentBricks p;
-          p.index = s;
-          p.lower_world = stats.lower_world;
-          p.upper_world = stats.upper_world;
-          p.complete = done;
-          p.last = done && s + 1 == segments;
-          p.bricks = std::move(part);
-          if (on_segment) on_segment(std::move(p));
-        } else {
-          whole.bricks.insert(whole.bricks.end(), std::make_move_iterator(part.begin()),
-                              std::make_move_iterator(part.end()));
-        }
-        if (done) break;
-        c0 = c1;
+        source.keys = std::move(keys);
+        result.bricks_allocated = int64_t(outside.keys.size() + inside.keys.size());
+        ok = emitSegments(grid, options, source, &result, on_segment);
       }
-      if (!options.max_chunk_bricks) {
-        whole.index = s;
-        whole.lower_world = stats.lower_world;
-        whole.upper_world = stats.upper_world;
-        whole.last = s + 1 == segments;
-        if (on_segment) on_segment(std::move(whole));
-      }
-      std::vector<uint32_t>().swap(by_segment[size_t(s)]);
-      stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
-      result.voxels += stats.voxels;
-      result.segments.push_back(stats);
     }
-    result.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+    result.interrupted = !ok;
+    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
   runWithThreads(options.threads, body);
   return result;

@@ -49,7 +49,7 @@ void QueryJob::run() {
       options.threads = 0;  // the shared arena we are executing in
       options.interrupter = interrupter_;
       options.max_chunk_bricks = kQueryChunkBricks;
-      if (query_.plan.algorithm == FieldAlgorithm::kSeparable) {  // a whole-grid volume: no band, no seeds to build
+      if (query_.plan.algorithm == FieldAlgorithm::kSeparable) {  // an exact volume: no seeds to build
         segment_started_ = Clock::now();
         result_ = computeSeparableVolumeField(query_.engineGrid(), *query_.asset->mask, query_.plan.inside_negative,
                                               options, [this](SegmentBricks&& s) { emitChunk(std::move(s)); });

@@ -3,9 +3,11 @@
 // once, bricks sorted, chunks), identical for any thread count, stopped by its interrupter; and the planner's
 // choice of it.
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <vector>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "core/field_plan.h"
@@ -117,6 +119,93 @@ TEST(SeparableEdtTest, IdenticalForAnyThreadCountAndStoppedByItsInterrupter) {
   EXPECT_EQ(stopped.result.voxels, 0);
 }
 
+// Blobs plus a solid box: whole bricks inside the mask, whole bricks outside beside them, and blobs cut by the faces.
+std::vector<uint8_t> blobsAndBox(const Coord& d, uint64_t seed) {
+  std::vector<uint8_t> mask = randomBlobs(d, 8, seed);
+  for (int z = 3; z < 30 && z < d.z; ++z)
+    for (int y = 9; y < 41 && y < d.y; ++y)
+      for (int x = 0; x < 26 && x < d.x; ++x) mask[(size_t(z) * d.y + y) * d.x + x] = 1;
+  return mask;
+}
+
+TEST(SeparableEdtTest, WithALimitDeliversExactlyTheVoxelsWithinIt) {
+  const Coord d{53, 47, 38};
+  const Grid grid({0, 0, 0}, 0.25, d);
+  const std::vector<uint8_t> mask = blobsAndBox(d, 5);
+  const std::vector<double> exact2 = oracle::edtSqr(d.x, d.y, d.z, mask);
+  const std::vector<double> signed_exact = oracle::signedEdt(d.x, d.y, d.z, mask);
+  // Limits in voxels; squares that are not integers, so no voxel sits on the limit. 9.7 reaches two bricks away;
+  // 20.5 takes the parabola envelope instead of the window minimum.
+  for (double limit : {0.7, 1.5, 3.3, 5.5, 9.7, 20.5})
+    for (bool inside_negative : {false, true})
+      for (double segment : {0.0, 0.3}) {
+        EngineOptions o;
+        o.limit_world = limit * 0.25;
+        o.segment_length_world = segment;
+        o.max_chunk_bricks = segment > 0 ? 5 : 0;
+        const Collected c = run(grid, mask, inside_negative, o);
+        const std::string where = fmt::format("limit {} signed {} segment {}", limit, inside_negative, segment);
+        EXPECT_EQ(c.order_error, "") << where;
+        int64_t wrong = 0, missing = 0, extra = 0, within = 0;
+        for (size_t i = 0; i < c.values.size(); ++i) {
+          const double want = inside_negative ? signed_exact[i] : std::sqrt(exact2[i]);
+          if (std::abs(want) > limit) {
+            extra += c.times_delivered[i] != 0;
+            continue;
+          }
+          ++within;
+          missing += c.times_delivered[i] != 1;
+          wrong += c.times_delivered[i] == 1 && std::abs(c.values[i] - 0.25 * want) > 1e-6;
+        }
+        EXPECT_EQ(missing, 0) << where;
+        EXPECT_EQ(extra, 0) << where << ": delivered beyond the limit";
+        EXPECT_EQ(wrong, 0) << where;
+        EXPECT_EQ(c.result.voxels, within) << where;
+        for (const SegmentStats& s : c.result.segments) EXPECT_LE(s.upper_world, o.limit_world) << where;
+      }
+}
+
+TEST(SeparableEdtTest, WithALimitTheWorkFollowsTheBand) {
+  // One small ball in a 256^3 grid (32768 bricks): the passes visit the bricks near it, not the grid.
+  const Coord d{256, 256, 256};
+  const Grid grid({0, 0, 0}, 1, d);
+  std::vector<uint8_t> mask(size_t(grid.voxelCount()), 0);
+  for (int z = 120; z < 126; ++z)
+    for (int y = 60; y < 66; ++y)
+      for (int x = 200; x < 206; ++x) mask[(size_t(z) * d.y + y) * d.x + x] = 1;
+  for (double limit : {3.5, 12.5}) {
+    EngineOptions o;
+    o.limit_world = limit;
+    const Collected c = run(grid, mask, false, o);
+    EXPECT_EQ(c.order_error, "");
+    // The ball's box grown by the limit spans at most 4 (3.5) or 6 (12.5) bricks a side.
+    const int64_t side = limit < 8 ? 4 : 6;
+    EXPECT_LE(c.result.bricks_allocated, side * side * side) << limit;
+    EXPECT_GT(c.result.voxels, 200) << limit;
+  }
+}
+
+TEST(SeparableEdtTest, WithALimitIdenticalForAnyThreadCountAndStoppable) {
+  const Coord d{96, 80, 72};
+  const Grid grid({0, 0, 0}, 1, d);
+  const std::vector<uint8_t> mask = blobsAndBox(d, 9);
+  EngineOptions o;
+  o.limit_world = 6.5;
+  o.segment_length_world = 2;
+  o.threads = 1;
+  const Collected one = run(grid, mask, true, o);
+  o.threads = 2;
+  const Collected two = run(grid, mask, true, o);
+  EXPECT_GT(one.result.voxels, 10000);
+  EXPECT_EQ(std::memcmp(one.values.data(), two.values.data(), one.values.size() * sizeof(float)), 0);
+  Interrupter stop;
+  stop.cancel(Status::Code::kCancelled, "test");
+  o.interrupter = &stop;
+  const Collected stopped = run(grid, mask, false, o);
+  EXPECT_TRUE(stopped.result.interrupted);
+  EXPECT_EQ(stopped.result.voxels, 0);
+}
+
 TEST(SeparableEdtTest, RejectsMasksItCannotMeasure) {
   const Grid grid({0, 0, 0}, 1, {8, 8, 8});
   EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(512, 0), false, {}, {}), std::invalid_argument);
@@ -124,7 +213,7 @@ TEST(SeparableEdtTest, RejectsMasksItCannotMeasure) {
   EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(100, 1), false, {}, {}), std::invalid_argument);
 }
 
-TEST(SeparableEdtTest, ThePlannerPicksItForWholeGridVolumesOnly) {
+TEST(SeparableEdtTest, ThePlannerPicksItForExactVolumesOnly) {
   const Grid grid({0, 0, 0}, 1, {16, 16, 16});
   FieldPlan p;
   FieldRequest r;
@@ -132,9 +221,9 @@ TEST(SeparableEdtTest, ThePlannerPicksItForWholeGridVolumesOnly) {
   ASSERT_EQ(planField(r, grid, nullptr, &p), "");
   EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
   FieldRequest limited = r;
-  limited.limit_world = 5;  // a limit: the work must follow the band
+  limited.limit_world = 5;  // a limit: the separable passes over the bricks within it
   ASSERT_EQ(planField(limited, grid, nullptr, &p), "");
-  EXPECT_EQ(p.algorithm, FieldAlgorithm::kBand);
+  EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
   for (auto change : {+[](FieldRequest& f) { f.stencil = StencilKind::kCubic26; },
                       +[](FieldRequest& f) { f.mode = PropagationMode::kPaper; },
                       +[](FieldRequest& f) { f.closest_features = true; },

@@ -141,8 +141,9 @@ TEST(ServiceTest, VolumeUploadAndSignedQueryMatchInProcess) {
   EXPECT_TRUE(any_negative);
 }
 
-// A volume without a limit is the whole grid: the server picks the separable EDT, says so in the header, and the
-// streamed field equals the exact EDT (tests/support/exact_edt) at every voxel, nearest segment first.
+// A volume in exact mode takes the separable EDT: the server says so in the header, and the streamed field equals the
+// exact EDT (tests/support/exact_edt) at every voxel (whole grid) or at every voxel within the limit, nearest segment
+// first.
 TEST(ServiceTest, WholeGridVolumeIsTheExactSeparableEdt) {
   TestServer ts;
   const Coord dims{37, 30, 26};
@@ -168,8 +169,25 @@ TEST(ServiceTest, WholeGridVolumeIsTheExactSeparableEdt) {
   int64_t wrong = 0;
   for (size_t i = 0; i < exact.size(); ++i) wrong += !(std::abs(s.field->values()[i] - 0.5 * exact[i]) <= 1e-5);
   EXPECT_EQ(wrong, 0);
-  r.set_limit(3.0);  // a limit: the band, whose work follows the voxels inside it
-  EXPECT_EQ(stream(ts.client(), r, 3.0f).result.header.algorithm(), "band");
+  // A limit: the separable passes over the bricks within it, exact there and nothing beyond (background NaN).
+  r.set_limit(1.6);
+  const Streamed limited = stream(ts.client(), r, NAN);
+  ASSERT_TRUE(limited.result.status.ok()) << limited.result.status.error_message();
+  EXPECT_EQ(limited.result.header.algorithm(), "separable");
+  EXPECT_TRUE(limited.order_error.empty()) << limited.order_error;
+  int64_t wrong_within = 0, beyond = 0, within = 0;
+  for (size_t i = 0; i < exact.size(); ++i) {
+    const float got = limited.field->values()[i];
+    if (std::abs(0.5 * exact[i]) > 1.6) {
+      beyond += !std::isnan(got);
+      continue;
+    }
+    ++within;
+    wrong_within += !(std::abs(got - 0.5 * exact[i]) <= 1e-5);
+  }
+  EXPECT_GT(within, 1000);
+  EXPECT_EQ(wrong_within, 0);
+  EXPECT_EQ(beyond, 0);
 }
 
 TEST(ServiceTest, MeshUploadInChunksAndQueryMatchInProcess) {

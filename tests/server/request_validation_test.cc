@@ -573,13 +573,13 @@ TEST_F(ResolveQueryTest, VolumeWithoutLimitUsesTheSeparableEdt) {
   EXPECT_EQ(signOf(q.plan), v1::SIGN_MODE_UNSIGNED);
 }
 
-TEST_F(ResolveQueryTest, VolumeWithLimitUsesTheBand) {
+TEST_F(ResolveQueryTest, VolumeWithLimitUsesTheSeparableEdtWithinIt) {
   v1::QueryRequest r = inlineVolume();
   r.set_limit(3);
-  EXPECT_EQ(resolveOk(r).plan.algorithm, FieldAlgorithm::kBand);
+  EXPECT_EQ(resolveOk(r).plan.algorithm, FieldAlgorithm::kSeparable);
   r = inlineVolume();
   r.set_limit_voxels(3);
-  EXPECT_EQ(resolveOk(r).plan.algorithm, FieldAlgorithm::kBand);
+  EXPECT_EQ(resolveOk(r).plan.algorithm, FieldAlgorithm::kSeparable);
 }
 
 TEST_F(ResolveQueryTest, VolumeAskingForTheBandsChoicesUsesTheBand) {

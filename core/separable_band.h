@@ -1,0 +1,47 @@
+// Separable band: the exact squared distances of the voxels within a limit of a seed volume, computed axis by axis
+// like the whole-grid separable EDT, but only on the bricks that can hold them, so work and memory follow the band
+// and not the grid. Internal to core (core/separable_edt.cc streams its result).
+// Contract:
+//   * Seeds are the voxels whose mask test ((mask != 0) == seeds_nonzero) holds; targets are the others. For every
+//     target within sqrt(cut2) voxels of a seed the result holds its exact squared distance to the nearest seed; every
+//     other target holds kFarSquared (core/separable_lines.h) or a value > cut2. Values at seed voxels are unspecified
+//     (the caller knows them: 0, or the other side's distance when signed).
+//   * Why it is exact: the nearest seed q of a target p has a 6-neighbour that is no seed (step from q towards p
+//     along an axis where they differ: that voxel is closer to p, so it is no seed). Such seeds lie in bricks that are
+//     mixed or next to a brick that is not all seeds; the passes use the seeds of those bricks only, and a squared
+//     distance is a sum of the passes' non-negative terms, so values beyond cut2 can be dropped after every pass.
+//   * Work: the mask is read once, a machine word per brick row, to classify bricks; then three line passes (x, y,
+//     z), each over the previous pass's bricks dilated by ceil(sqrt(cut2) / 8) bricks along its axis. With a limit of
+//     L voxels that is O(band bricks x (1 + 2L/8)^(1..3)) brick visits; memory 2 KiB per visited brick, plus one byte
+//     per brick of the grid for the classification.
+//   * Deterministic (the same result for any thread count); runs in the caller's TBB arena. The interrupter is polled
+//     per brick slab and per run of bricks; an interrupted call returns false.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "core/grid.h"
+#include "core/interrupter.h"
+
+namespace distband {
+
+/// Bricks with their squared distances: keys ascending (linear brick index, i.e. (z, y, x) order of the origins),
+/// values[i] holds kBrickVoxels entries in brickOffset order.
+struct SquaredBricks {
+  std::vector<uint64_t> keys;
+  std::vector<std::unique_ptr<uint32_t[]>> values;
+  /// values[i] for brick key `key`, or null when it is not listed. O(log n).
+  const uint32_t* find(uint64_t key) const;
+};
+
+/// Per brick of the grid (linear brick index): 0 no mask voxel, 1 every voxel (inside the grid) a mask voxel, 2 both.
+std::vector<uint8_t> classifyMaskBricks(const Coord& dims, const std::vector<uint8_t>& mask,
+                                        const Interrupter* interrupter);
+
+/// See above. `brick_kinds` from classifyMaskBricks; `cut2` >= 0. False when interrupted.
+bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask, const std::vector<uint8_t>& brick_kinds,
+                            bool seeds_nonzero, uint32_t cut2, const Interrupter* interrupter, SquaredBricks* out);
+
+}  // namespace distband
