@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -55,12 +56,19 @@ struct Row {
   int n = 0, threads = 0;
   double limit_voxels = 0;
   double distband_s = 0, edt_s = 0;
+  double distband_cpu_s = 0, edt_cpu_s = 0;  // process CPU time (all threads): steadier than wall time when shared
   int64_t voxels = 0;  // distband: delivered
   double max_err_voxels = 0, exact_fraction = 0;
   int64_t updates = 0;
 };
 
-Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm) {
+double processCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+}
+
+Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool peer) {
   const int n = c.n;
   const std::vector<uint8_t> mask = c.mask(n);
   const Grid grid({0, 0, 0}, 1.0, {n, n, n});
@@ -75,17 +83,20 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm) {
   std::vector<uint8_t> foreground(mask.size());
   for (size_t i = 0; i < mask.size(); ++i) foreground[i] = mask[i] ? 0 : 1;
   std::vector<float> exact;
-  std::vector<double> edt_times;
-  for (int r = 0; r < reps; ++r) {
+  std::vector<double> edt_times, edt_cpu;
+  for (int r = 0; r < reps && peer; ++r) {
     const auto t0 = Clock::now();
+    const double cpu0 = processCpuSeconds();
     float* d = edt::binary_edt<uint8_t>(foreground.data(), n, n, n, 1.f, 1.f, 1.f, false, threads);
     edt_times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+    edt_cpu.push_back(processCpuSeconds() - cpu0);
     if (r == 0) exact.assign(d, d + mask.size());
     delete[] d;
   }
-  row.edt_s = median(edt_times);
+  row.edt_s = peer ? median(edt_times) : NAN;
+  row.edt_cpu_s = peer ? median(edt_cpu) : NAN;
 
-  std::vector<double> times;
+  std::vector<double> times, cpu;
   for (int r = 0; r < reps; ++r) {
     Seeds seeds;
     if (c.as_points) {
@@ -102,8 +113,9 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm) {
     o.max_chunk_bricks = 4096;
     int64_t exact_count = 0, voxels = 0;
     double max_err = 0;
-    const bool check = r == 0;
+    const bool check = r == 0 && peer;
     const auto t0 = Clock::now();
+    const double cpu0 = processCpuSeconds();
     double check_s = 0;
     auto consume = [&](SegmentBricks&& s) {
       if (!check) return;
@@ -123,14 +135,17 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm) {
                                     ? computeSeparableVolumeField(grid, mask, false, o, consume)
                                     : computeDistanceField(grid, seeds, o, consume);
     times.push_back(std::chrono::duration<double>(Clock::now() - t0).count() - check_s);
+    cpu.push_back(processCpuSeconds() - cpu0 - check_s);
+    row.voxels = result.voxels;
     if (check) {
-      row.voxels = voxels;
+      if (voxels != result.voxels) throw std::runtime_error("the delivered bricks disagree with the engine's count");
       row.max_err_voxels = max_err;
       row.exact_fraction = voxels ? double(exact_count) / double(voxels) : 1.0;
       row.updates = result.updates;
     }
   }
   row.distband_s = median(times);
+  row.distband_cpu_s = median(cpu);
   return row;
 }
 
@@ -149,6 +164,8 @@ int main(int argc, char** argv) {
   app.add_option("--json", json_path, "Also write the rows as JSON");
   bool compare_band = true;
   app.add_option("--compare-band", compare_band, "Full-domain rows: also run the band engine forced (slow at 512³)");
+  bool peer = true;
+  app.add_option("--peer", peer, "Run edt (and check against it); false: distband alone, e.g. under a profiler");
   CLI11_PARSE(app, argc, argv);
   const double inf = std::numeric_limits<double>::infinity();
   const std::vector<Case> cases = {
@@ -160,7 +177,7 @@ int main(int argc, char** argv) {
       {"random blobs, limit 5 voxels", 512, 5, bench::randomBlobsMask},
   };
   std::printf("| case | grid | distband algorithm | threads | distband engine s | edt s | ratio | voxels delivered | ns per voxel per "
-              "thread | updates per voxel | max err (voxel) | exact |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+              "thread | updates per voxel | max err (voxel) | exact | distband CPU s | edt CPU s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   nlohmann::json rows = nlohmann::json::array();
   for (const Case& c : cases) {
     if (!only.empty() && c.name != only) continue;
@@ -174,15 +191,17 @@ int main(int argc, char** argv) {
     if (plan.algorithm != FieldAlgorithm::kBand && compare_band) algorithms.push_back(FieldAlgorithm::kBand);
     for (FieldAlgorithm algorithm : algorithms)
     for (int t : threads) {
-      const Row r = run(c, t, reps, algorithm);
-      std::printf("| %s | %d³ | %s | %d | %.3f | %.3f | %.2f | %lld | %.0f | %.2f | %.3f | %.2f %% |\n", r.name.c_str(), r.n,
+      const Row r = run(c, t, reps, algorithm, peer);
+      std::printf("| %s | %d³ | %s | %d | %.3f | %.3f | %.2f | %lld | %.0f | %.2f | %.3f | %.2f %% | %.3f | %.3f |\n", r.name.c_str(), r.n,
                   r.algorithm.c_str(), r.threads, r.distband_s, r.edt_s, r.distband_s / r.edt_s, (long long)r.voxels,
                   1e9 * r.distband_s * r.threads / double(std::max<int64_t>(1, r.voxels)),
-                  double(r.updates) / double(std::max<int64_t>(1, r.voxels)), r.max_err_voxels, 100 * r.exact_fraction);
+                  double(r.updates) / double(std::max<int64_t>(1, r.voxels)), r.max_err_voxels, 100 * r.exact_fraction,
+                  r.distband_cpu_s, r.edt_cpu_s);
       std::fflush(stdout);
       rows.push_back({{"case", r.name}, {"n", r.n}, {"algorithm", r.algorithm}, {"threads", r.threads},
                       {"limit_voxels", std::isfinite(r.limit_voxels) ? nlohmann::json(r.limit_voxels) : nlohmann::json()},
-                      {"distband_s", r.distband_s}, {"edt_s", r.edt_s}, {"ratio", r.distband_s / r.edt_s},
+                      {"distband_s", r.distband_s}, {"edt_s", r.edt_s},
+                      {"distband_cpu_s", r.distband_cpu_s}, {"edt_cpu_s", r.edt_cpu_s}, {"ratio", r.distband_s / r.edt_s},
                       {"voxels", r.voxels}, {"updates", r.updates}, {"max_err_voxels", r.max_err_voxels},
                       {"exact_fraction", r.exact_fraction}, {"reps", reps}});
     }
