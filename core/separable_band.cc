@@ -1,13 +1,16 @@
 #include "core/separable_band.h"
 
-#include <algorithm>
-#include <array>
-#include <cmath>
-#include <cstring>
-
+#include <sys/mman.h>
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <new>
 
 #include "core/brick.h"
 #include "core/separable_lines.h"
@@ -16,15 +19,17 @@ namespace distband {
 namespace {
 
 constexpr uint8_t kNoMask = 0, kAllMask = 1, kMixed = 2;
-constexpr int kStride[3] = {64, 8, 1};  // brickOffset's step along x, y, z
-constexpr int kWindowReach = 16;                // see squaredDistancesWithin
+constexpr int kStride[3] = {64, 8, 1};              // brickOffset's step along x, y, z
+constexpr int kWindowReach = 16;                    // see squaredDistancesWithin
 constexpr uint32_t kWindowFar = uint32_t(1) << 30;  // "far" inside the window minimum: far + reach^2 cannot wrap
 
 bool hasZeroByte(uint64_t w) { return ((w - 0x0101010101010101ull) & ~w & 0x8080808080808080ull) != 0; }
 
 struct BrickDims {
   Coord bd;
-  uint64_t key(const int c[3]) const { return (uint64_t(c[2]) * uint64_t(bd.y) + uint64_t(c[1])) * uint64_t(bd.x) + uint64_t(c[0]); }
+  uint64_t key(const int c[3]) const {
+    return (uint64_t(c[2]) * uint64_t(bd.y) + uint64_t(c[1])) * uint64_t(bd.x) + uint64_t(c[0]);
+  }
   void coords(uint64_t key, int c[3]) const {
     c[0] = int(key % uint64_t(bd.x));
     c[1] = int(key / uint64_t(bd.x) % uint64_t(bd.y));
@@ -37,9 +42,9 @@ struct BrickDims {
 /// start all kFarSquared (allocated by the pass, on the thread that fills them).
 struct Runs {
   struct Run {
-    int other[2];   // the run's brick coordinates on the two other axes (ascending axis order)
-    int lo, hi;     // brick range along the axis, inclusive
-    size_t first;   // its first brick in `slot`
+    int other[2];  // the run's brick coordinates on the two other axes (ascending axis order)
+    int lo, hi;    // brick range along the axis, inclusive
+    size_t first;  // its first brick in `slot`
   };
   std::vector<Run> runs;
   std::vector<uint32_t> slot;
@@ -47,8 +52,49 @@ struct Runs {
   std::vector<uint8_t> seed;  // pass 1: the brick's seeds count (it holds a seed's boundary)
 };
 
-/// The pool of brick values; a slot stays valid until it is released.
-using Pool = std::vector<std::unique_ptr<uint32_t[]>>;
+/// Brick values by slot: null until the brick holds a value (bricks live in a BrickArena).
+using Pool = std::vector<uint32_t*>;
+
+/// Where bricks live: carved from 2 MiB slabs, one open slab per thread. First touches of fresh memory are a large
+/// part of a pass's cost (page faults are slow on virtual machines): slabs ask for transparent huge pages, and a brick
+/// is only allocated once it holds a value.
+class BrickArena {
+ public:
+  static constexpr size_t kSlabBytes = size_t(2) << 20;
+  static constexpr size_t kSlabBricks = kSlabBytes / (kBrickVoxels * sizeof(uint32_t));
+  uint32_t* allocate() {
+    Local& l = local_.local();
+    if (l.left == 0) {
+      void* p = std::aligned_alloc(kSlabBytes, kSlabBytes);
+      if (!p) throw std::bad_alloc();
+#ifdef MADV_HUGEPAGE
+      ::madvise(p, kSlabBytes, MADV_HUGEPAGE);  // advice only: without it, 4 KiB pages
+#endif
+      l.slabs.emplace_back(p, std::free);
+      l.next = static_cast<uint32_t*>(p);
+      l.left = kSlabBricks;
+    }
+    --l.left;
+    uint32_t* b = l.next;
+    l.next += kBrickVoxels;
+    return b;
+  }
+  /// Hands the slabs over (the arena is left empty).
+  void release(std::vector<std::shared_ptr<void>>* to) {
+    for (Local& l : local_) {
+      for (auto& s : l.slabs) to->push_back(std::move(s));
+      l = Local{};
+    }
+  }
+
+ private:
+  struct Local {
+    std::vector<std::shared_ptr<void>> slabs;
+    uint32_t* next = nullptr;
+    size_t left = 0;
+  };
+  tbb::enumerable_thread_specific<Local> local_;
+};
 
 /// Groups `bricks` (their coordinates and pool slots; slot kNoSlot: not allocated yet) along `axis`, dilated by
 /// `reach` bricks along it, into runs. Bricks the dilation adds get fresh slots at the end of the pool.
@@ -57,8 +103,7 @@ struct BrickRef {
   int c[3];
   uint32_t slot;
 };
-Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const BrickDims& dims, Pool& pool,
-               bool all_fresh) {
+Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const BrickDims& dims, Pool& pool, bool all_fresh) {
   const int o0 = axis == 0 ? 1 : 0, o1 = axis == 2 ? 1 : 2;  // the other two axes, ascending
   std::sort(bricks.begin(), bricks.end(), [&](const BrickRef& a, const BrickRef& b) {
     return std::tie(a.c[o1], a.c[o0], a.c[axis]) < std::tie(b.c[o1], b.c[o0], b.c[axis]);
@@ -85,7 +130,7 @@ Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const BrickDi
         const bool fresh = all_fresh || s == kNoSlot;
         if (s == kNoSlot) {
           s = uint32_t(pool.size());
-          pool.emplace_back();
+          pool.push_back(nullptr);
         }
         r.slot.push_back(s);
         r.fresh.push_back(fresh);
@@ -129,31 +174,34 @@ struct LineScratch {
 /// Runs `lines(run index, base, w_end, length, brick values, scratch)` for every eight lines of voxels of every run
 /// that share their local coordinate u on the first other axis: line w (< w_end, inside the grid) is voxel offset
 /// base + w * kStride[second other axis] + i * kStride[axis] of brick i / 8 at position i < length. In parallel over
-/// runs; allocates each run's fresh bricks first and releases the bricks a run leaves all kFarSquared. False when
-/// interrupted.
+/// runs. A run's fresh bricks are worked on in scratch and allocated from `arena` only if they got a value. False
+/// when interrupted.
 template <typename Lines>
-bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, Pool& pool, const Interrupter* interrupter,
-                  const Lines& lines) {
+bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, Pool& pool, BrickArena& arena,
+                  const Interrupter* interrupter, const Lines& lines) {
   const int o0 = axis == 0 ? 1 : 0, o1 = axis == 2 ? 1 : 2;
   const int n[3] = {dims.x, dims.y, dims.z};
   // Scratch per thread, not per range: ranges are a few runs each, and fresh buffers cost more than the runs' lines.
   tbb::enumerable_thread_specific<LineScratch> scratches(n[axis], reach_voxels);
   tbb::enumerable_thread_specific<std::vector<uint32_t*>> brick_lists;
+  tbb::enumerable_thread_specific<std::vector<uint32_t>> fresh_scratch;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, r.runs.size(), 4), [&](const tbb::blocked_range<size_t>& range) {
     std::vector<uint32_t*>& bricks = brick_lists.local();
+    std::vector<uint32_t>& fresh = fresh_scratch.local();
     LineScratch& scratch = scratches.local();
     for (size_t ri = range.begin(); ri != range.end(); ++ri) {
       if (isInterrupted(interrupter)) return;
       const Runs::Run& run = r.runs[ri];
       const size_t count = size_t(run.hi - run.lo + 1);
       bricks.resize(count);
+      if (fresh.size() < count * kBrickVoxels) fresh.resize(count * kBrickVoxels);
       for (size_t i = 0; i < count; ++i) {
-        auto& p = pool[r.slot[run.first + i]];
         if (r.fresh[run.first + i]) {
-          p.reset(new uint32_t[kBrickVoxels]);
-          std::fill(p.get(), p.get() + kBrickVoxels, kFarSquared);
+          bricks[i] = fresh.data() + i * kBrickVoxels;
+          std::fill(bricks[i], bricks[i] + kBrickVoxels, kFarSquared);
+        } else {
+          bricks[i] = pool[r.slot[run.first + i]];
         }
-        bricks[i] = p.get();
       }
       const int length = std::min(int(count) * kBrickSize, n[axis] - run.lo * kBrickSize);
       const int u_end = std::min(kBrickSize, n[o0] - run.other[0] * kBrickSize);
@@ -161,8 +209,11 @@ bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, 
       for (int u = 0; u < u_end; ++u) lines(ri, u, u * kStride[o0], w_end, length, bricks.data(), scratch);
       for (size_t i = 0; i < count; ++i) {
         const uint32_t* v = bricks[i];
-        if (std::all_of(v, v + kBrickVoxels, [](uint32_t x) { return x == kFarSquared; }))
-          pool[r.slot[run.first + i]].reset();
+        if (!r.fresh[run.first + i] || std::all_of(v, v + kBrickVoxels, [](uint32_t x) { return x == kFarSquared; }))
+          continue;
+        uint32_t* kept = arena.allocate();
+        std::copy(v, v + kBrickVoxels, kept);
+        pool[r.slot[run.first + i]] = kept;
       }
     }
   });
@@ -173,7 +224,7 @@ bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, 
 
 const uint32_t* SquaredBricks::find(uint64_t key) const {
   const auto it = std::lower_bound(keys.begin(), keys.end(), key);
-  return it != keys.end() && *it == key ? values[size_t(it - keys.begin())].get() : nullptr;
+  return it != keys.end() && *it == key ? values[size_t(it - keys.begin())] : nullptr;
 }
 
 std::vector<uint8_t> classifyMaskBricks(const Coord& dims, const std::vector<uint8_t>& mask,
@@ -249,79 +300,83 @@ bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask,
   // when that is cheaper than the envelope's per-voxel bookkeeping: limits up to ~16 voxels.
   const bool window = reach_voxels <= kWindowReach;
   Pool pool;
+  BrickArena arena;
   // Pass 1, along x: each voxel's squared distance to the nearest seed of its row (within the boundary bricks).
   Runs runs = buildRuns(bricks, 0, reach_bricks, bdims, pool, true);
-  const bool ok1 = forEachLines(runs, 0, dims, reach_voxels, pool, interrupter, [&](size_t ri, int u, int base, int w_end,
-                                                                             int length, uint32_t* const* values,
-                                                                             LineScratch&) {
-    const Runs::Run& run = runs.runs[ri];
-    const uint8_t* seed_brick = runs.seed.data() + run.first;
-    for (int w = 0; w < w_end; ++w) {
-      const size_t y = size_t(run.other[0]) * kBrickSize + size_t(u), z = size_t(run.other[1]) * kBrickSize + size_t(w);
-      const uint8_t* row = mask.data() + (z * size_t(dims.y) + y) * size_t(dims.x) + size_t(run.lo) * kBrickSize;
-      const int line = base + w * kStride[2];
-      auto isSeed = [&](int i) { return seed_brick[i / kBrickSize] && (row[i] != 0) == seeds_nonzero; };
-      int last = -1;
-      for (int i = 0; i < length; ++i) {
-        if (isSeed(i)) last = i;
-        if (last >= 0) values[i / kBrickSize][line + (i % kBrickSize) * kStride[0]] = keep(uint32_t((i - last) * (i - last)));
-      }
-      last = -1;
-      for (int i = length - 1; i >= 0; --i) {
-        if (isSeed(i)) last = i;
-        if (last < 0) continue;
-        uint32_t& v = values[i / kBrickSize][line + (i % kBrickSize) * kStride[0]];
-        v = std::min(v, keep(uint32_t((last - i) * (last - i))));
-      }
-    }
-  });
+  const bool ok1 = forEachLines(
+      runs, 0, dims, reach_voxels, pool, arena, interrupter,
+      [&](size_t ri, int u, int base, int w_end, int length, uint32_t* const* values, LineScratch&) {
+        const Runs::Run& run = runs.runs[ri];
+        const uint8_t* seed_brick = runs.seed.data() + run.first;
+        for (int w = 0; w < w_end; ++w) {
+          const size_t y = size_t(run.other[0]) * kBrickSize + size_t(u),
+                       z = size_t(run.other[1]) * kBrickSize + size_t(w);
+          const uint8_t* row = mask.data() + (z * size_t(dims.y) + y) * size_t(dims.x) + size_t(run.lo) * kBrickSize;
+          const int line = base + w * kStride[2];
+          auto isSeed = [&](int i) { return seed_brick[i / kBrickSize] && (row[i] != 0) == seeds_nonzero; };
+          int last = -1;
+          for (int i = 0; i < length; ++i) {
+            if (isSeed(i)) last = i;
+            if (last >= 0)
+              values[i / kBrickSize][line + (i % kBrickSize) * kStride[0]] = keep(uint32_t((i - last) * (i - last)));
+          }
+          last = -1;
+          for (int i = length - 1; i >= 0; --i) {
+            if (isSeed(i)) last = i;
+            if (last < 0) continue;
+            uint32_t& v = values[i / kBrickSize][line + (i % kBrickSize) * kStride[0]];
+            v = std::min(v, keep(uint32_t((last - i) * (last - i))));
+          }
+        }
+      });
   if (!ok1) return false;
   // Passes 2 and 3, along y and z: the lower envelope of the previous pass's parabolas on each line.
   for (int axis : {1, 2}) {
     bricks = liveBricks(runs, axis == 1 ? 0 : 1, pool);
     runs = buildRuns(bricks, axis, reach_bricks, bdims, pool, false);
     const int o1 = axis == 2 ? 1 : 2;  // the second other axis: the lanes of a bundle
-    const bool ok = forEachLines(runs, axis, dims, reach_voxels, pool, interrupter, [&](size_t, int, int base, int w_end,
-                                                                                 int length, uint32_t* const* values,
-                                                                                 LineScratch& s) {
-      auto at = [&](int i, int w) -> uint32_t& {
-        return values[i / kBrickSize][base + w * kStride[o1] + (i % kBrickSize) * kStride[axis]];
-      };
-      if (window) {
-        // Eight lines at once: their values side by side, padded by the reach's far rows at both ends.
-        auto* lane = s.lanes.data() + reach_voxels;
-        bool any = false;
-        for (int i = -reach_voxels; i < length + reach_voxels; ++i) lane[i].fill(kWindowFar);
-        for (int i = 0; i < length; ++i)
-          for (int w = 0; w < w_end; ++w) {
-            const uint32_t f = at(i, w);
-            any |= f != kFarSquared;
-            if (f != kFarSquared) lane[i][size_t(w)] = f;
-          }
-        if (!any) return;
-        for (int i = 0; i < length; ++i) {
-          std::array<uint32_t, kBrickSize> m = lane[i];
-          for (int k = 1; k <= reach_voxels; ++k) {
-            const uint32_t kk = uint32_t(k * k);
-            const auto& lo = lane[i - k];
-            const auto& hi = lane[i + k];
-            for (size_t w = 0; w < kBrickSize; ++w) m[w] = std::min(m[w], std::min(lo[w], hi[w]) + kk);
-          }
-          for (int w = 0; w < w_end; ++w) at(i, w) = keep(m[size_t(w)]);
-        }
-        return;
-      }
-      for (int w = 0; w < w_end; ++w) {
-        bool any = false;
-        for (int i = 0; i < length; ++i) {
-          s.f[size_t(i)] = at(i, w);
-          any |= s.f[size_t(i)] != kFarSquared;
-        }
-        if (!any) continue;
-        parabolaEnvelope(s.f.data(), s.d.data(), length, s.v.data(), s.z.data());
-        for (int i = 0; i < length; ++i) at(i, w) = keep(s.d[size_t(i)]);
-      }
-    });
+    const bool ok =
+        forEachLines(runs, axis, dims, reach_voxels, pool, arena, interrupter,
+                     [&](size_t, int, int base, int w_end, int length, uint32_t* const* values, LineScratch& s) {
+                       auto at = [&](int i, int w) -> uint32_t& {
+                         return values[i / kBrickSize][base + w * kStride[o1] + (i % kBrickSize) * kStride[axis]];
+                       };
+                       if (window) {
+                         // Eight lines at once: their values side by side, padded by the
+                         // reach's far rows at both ends.
+                         auto* lane = s.lanes.data() + reach_voxels;
+                         bool any = false;
+                         for (int i = -reach_voxels; i < length + reach_voxels; ++i) lane[i].fill(kWindowFar);
+                         for (int i = 0; i < length; ++i)
+                           for (int w = 0; w < w_end; ++w) {
+                             const uint32_t f = at(i, w);
+                             any |= f != kFarSquared;
+                             if (f != kFarSquared) lane[i][size_t(w)] = f;
+                           }
+                         if (!any) return;
+                         for (int i = 0; i < length; ++i) {
+                           std::array<uint32_t, kBrickSize> m = lane[i];
+                           for (int k = 1; k <= reach_voxels; ++k) {
+                             const uint32_t kk = uint32_t(k * k);
+                             const auto& lo = lane[i - k];
+                             const auto& hi = lane[i + k];
+                             for (size_t w = 0; w < kBrickSize; ++w) m[w] = std::min(m[w], std::min(lo[w], hi[w]) + kk);
+                           }
+                           for (int w = 0; w < w_end; ++w) at(i, w) = keep(m[size_t(w)]);
+                         }
+                         return;
+                       }
+                       for (int w = 0; w < w_end; ++w) {
+                         bool any = false;
+                         for (int i = 0; i < length; ++i) {
+                           s.f[size_t(i)] = at(i, w);
+                           any |= s.f[size_t(i)] != kFarSquared;
+                         }
+                         if (!any) continue;
+                         parabolaEnvelope(s.f.data(), s.d.data(), length, s.v.data(), s.z.data());
+                         for (int i = 0; i < length; ++i) at(i, w) = keep(s.d[size_t(i)]);
+                       }
+                     });
     if (!ok) return false;
   }
   bricks = liveBricks(runs, 2, pool);
@@ -332,8 +387,9 @@ bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask,
   out->values.resize(order.size());
   for (size_t i = 0; i < order.size(); ++i) {
     out->keys[i] = order[i].first;
-    out->values[i] = std::move(pool[order[i].second]);
+    out->values[i] = pool[order[i].second];
   }
+  arena.release(&out->storage);
   return true;
 }
 

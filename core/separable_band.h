@@ -11,9 +11,10 @@
 //     mixed or next to a brick that is not all seeds; the passes use the seeds of those bricks only, and a squared
 //     distance is a sum of the passes' non-negative terms, so values beyond cut2 can be dropped after every pass.
 //   * Work: the mask is read once, a machine word per brick row, to classify bricks; then three line passes (x, y,
-//     z), each over the previous pass's bricks dilated by ceil(sqrt(cut2) / 8) bricks along its axis. With a limit of
-//     L voxels that is O(band bricks x (1 + 2L/8)^(1..3)) brick visits; memory 2 KiB per visited brick, plus one byte
-//     per brick of the grid for the classification.
+//     z), each over the previous pass's bricks grown by ceil(sqrt(cut2) / 8) bricks along its axis: with a limit of
+//     L voxels, O(boundary bricks x (1 + 2L/8)^(1..3)) brick visits. Memory: 2 KiB per brick that holds a value
+//     (bricks the growth adds are worked on in per-thread scratch and kept only if they got one), carved from
+//     2 MiB slabs per thread, plus one byte per brick of the grid for the classification.
 //   * Deterministic (the same result for any thread count); runs in the caller's TBB arena. The interrupter is polled
 //     per brick slab and per run of bricks; an interrupted call returns false.
 #pragma once
@@ -31,7 +32,8 @@ namespace distband {
 /// values[i] holds kBrickVoxels entries in brickOffset order.
 struct SquaredBricks {
   std::vector<uint64_t> keys;
-  std::vector<std::unique_ptr<uint32_t[]>> values;
+  std::vector<const uint32_t*> values;
+  std::vector<std::shared_ptr<void>> storage;  ///< owns the memory `values` point into
   /// values[i] for brick key `key`, or null when it is not listed. O(log n).
   const uint32_t* find(uint64_t key) const;
 };
@@ -41,7 +43,8 @@ std::vector<uint8_t> classifyMaskBricks(const Coord& dims, const std::vector<uin
                                         const Interrupter* interrupter);
 
 /// See above. `brick_kinds` from classifyMaskBricks; `cut2` >= 0. False when interrupted.
-bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask, const std::vector<uint8_t>& brick_kinds,
-                            bool seeds_nonzero, uint32_t cut2, const Interrupter* interrupter, SquaredBricks* out);
+bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask,
+                            const std::vector<uint8_t>& brick_kinds, bool seeds_nonzero, uint32_t cut2,
+                            const Interrupter* interrupter, SquaredBricks* out);
 
 }  // namespace distband

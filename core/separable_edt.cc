@@ -248,9 +248,11 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
                                          const EngineOptions& options, const SegmentCallback& on_segment) {
   if (std::string e = grid.validate(); !e.empty()) throw std::invalid_argument("grid: " + e);
   if (int64_t(mask.size()) != grid.voxelCount())
-    throw std::invalid_argument(fmt::format("the mask has {} bytes, the grid {} voxels", mask.size(), grid.voxelCount()));
+    throw std::invalid_argument(
+        fmt::format("the mask has {} bytes, the grid {} voxels", mask.size(), grid.voxelCount()));
   if (std::string e = checkSeedMask(mask, inside_negative); !e.empty()) throw std::invalid_argument(e);
-  if (!(options.limit_world > 0)) throw std::invalid_argument(fmt::format("limit must be > 0 (got {})", options.limit_world));
+  if (!(options.limit_world > 0))
+    throw std::invalid_argument(fmt::format("limit must be > 0 (got {})", options.limit_world));
   EngineResult result;
   auto body = [&] {
     const auto t0 = std::chrono::steady_clock::now();
