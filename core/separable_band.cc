@@ -55,24 +55,28 @@ struct Runs {
 /// Brick values by slot: null until the brick holds a value (bricks live in a BrickArena).
 using Pool = std::vector<uint32_t*>;
 
-/// Where bricks live: carved from 2 MiB slabs, one open slab per thread. First touches of fresh memory are a large
-/// part of a pass's cost (page faults are slow on virtual machines): slabs ask for transparent huge pages, and a brick
+/// Where bricks live: carved from slabs, one open slab per thread. First touches of fresh memory are a large part of
+/// a pass's cost (page faults are slow on virtual machines): 2 MiB slabs ask for transparent huge pages, and a brick
 /// is only allocated once it holds a value.
 class BrickArena {
  public:
-  static constexpr size_t kSlabBytes = size_t(2) << 20;
-  static constexpr size_t kSlabBricks = kSlabBytes / (kBrickVoxels * sizeof(uint32_t));
+  static constexpr size_t kBrickBytes = kBrickVoxels * sizeof(uint32_t);
+  // Each thread's slabs double from 64 KiB to 2 MiB, so a small band does not hold megabytes per thread (the space a
+  // thread's open slab leaves unused is at most what it already holds, plus 64 KiB), and a large one gets huge pages.
+  static constexpr size_t kFirstSlabBytes = size_t(64) << 10, kHugeSlabBytes = size_t(2) << 20;
   uint32_t* allocate() {
     Local& l = local_.local();
     if (l.left == 0) {
-      void* p = std::aligned_alloc(kSlabBytes, kSlabBytes);
+      const size_t bytes = l.slab_bytes;
+      void* p = std::aligned_alloc(bytes, bytes);
       if (!p) throw std::bad_alloc();
 #ifdef MADV_HUGEPAGE
-      ::madvise(p, kSlabBytes, MADV_HUGEPAGE);  // advice only: without it, 4 KiB pages
+      if (bytes == kHugeSlabBytes) ::madvise(p, bytes, MADV_HUGEPAGE);  // advice only: without it, 4 KiB pages
 #endif
       l.slabs.emplace_back(p, std::free);
       l.next = static_cast<uint32_t*>(p);
-      l.left = kSlabBricks;
+      l.left = bytes / kBrickBytes;
+      l.slab_bytes = std::min(2 * bytes, kHugeSlabBytes);
     }
     --l.left;
     uint32_t* b = l.next;
@@ -92,6 +96,7 @@ class BrickArena {
     std::vector<std::shared_ptr<void>> slabs;
     uint32_t* next = nullptr;
     size_t left = 0;
+    size_t slab_bytes = kFirstSlabBytes;
   };
   tbb::enumerable_thread_specific<Local> local_;
 };

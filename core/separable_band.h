@@ -14,7 +14,8 @@
 //     z), each over the previous pass's bricks grown by ceil(sqrt(cut2) / 8) bricks along its axis: with a limit of
 //     L voxels, O(boundary bricks x (1 + 2L/8)^(1..3)) brick visits. Memory: 2 KiB per brick that holds a value
 //     (bricks the growth adds are worked on in per-thread scratch and kept only if they got one), carved from
-//     2 MiB slabs per thread, plus one byte per brick of the grid for the classification.
+//     per-thread slabs of 64 KiB doubling to 2 MiB (at most twice the bricks held, plus 64 KiB a thread), plus one
+//     byte per brick of the grid for the classification.
 //   * Deterministic (the same result for any thread count); runs in the caller's TBB arena. The interrupter is polled
 //     per brick slab and per run of bricks; an interrupted call returns false.
 #pragma once
