@@ -21,7 +21,7 @@ constexpr double kMeshBytesPerTriangle = 400;   // index-space triangles, normal
 constexpr double kMeshBytesPerBandVoxel = 80;   // scan candidates, band list, paper-mode site points
 constexpr double kMeshBandVoxelsPerArea = 3.5;      // 2 x 1.5 voxels, plus lattice effects
 constexpr double kMeshBandVoxelsPerTriangle = 8;    // the band's rounded ends, counted per triangle
-constexpr double kSeparableBandBytesPerVoxel = 6;    // squared distances (4) in slabs used at least half
+constexpr double kSeparableBandBytesPerVoxel = 8;    // squared distances (4) in slabs used at least half
 constexpr double kSeparableBytesPerBandBrick = 96;  // pool pointer, run lists, segment ranges, output order
 constexpr double kSafety = 1.15;                // allocator slack on top of the measured sizes
 constexpr uint64_t kFixedBytes = uint64_t(8) << 20;  // per-run constants (thread buffers, arena)
@@ -65,10 +65,10 @@ FieldMemoryEstimate estimateFieldMemory(const FieldMemoryInput& in) {
   }
   if (in.separable) {  // no seeds and no band state
     const double sides = in.signed_volume ? 2 : 1;  // signed: the outside's and the inside's squared distances
-    if (in.touched_voxels < in.grid_voxels)
+    if (in.limited)
       // Within a limit: 4 bytes per voxel of the bricks that hold a value (inside the touched bound: the boundary's
-      // bricks grown by the limit), up to twice that in partly used slabs, their run lists, and a byte per grid
-      // brick for the mask's classification.
+      // bricks grown by the limit), up to twice that in partly used slabs (core/separable_band.h), their run lists,
+      // and a byte per grid brick for the mask's classification.
       engine = touched * kSeparableBandBytesPerVoxel * sides + touched_bricks * kSeparableBytesPerBandBrick +
                double(in.grid_voxels) / kBrickVoxels;
     else  // whole grid: squared distances per grid voxel, segment lists per brick

@@ -38,9 +38,10 @@ struct FieldMemoryInput {
   /// the estimate bounds by the touched voxels.
   uint64_t chunk_bricks = 0;
   bool closest_features = false;  ///< EngineOptions::closest_features: 4 KiB more per output brick
-  /// FieldAlgorithm::kSeparable: no band state; 4 bytes (8 signed) per grid voxel, or with a limit (touched_voxels
-  /// below the grid's) per touched voxel.
+  /// FieldAlgorithm::kSeparable: no band state; 4 bytes (8 signed) per grid voxel, or with a limit up to 8 (16) per
+  /// touched voxel.
   bool separable = false;
+  bool limited = false;  ///< the query has a finite limit
 };
 
 struct FieldMemoryEstimate {

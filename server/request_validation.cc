@@ -220,6 +220,7 @@ void estimateMemory(ResolvedQuery* q) {
   in.chunk_bricks = kQueryChunkBricks;
   in.closest_features = q->plan.closest_features;
   in.separable = q->plan.algorithm == FieldAlgorithm::kSeparable;
+  in.limited = std::isfinite(limit_voxels);
   switch (q->seed_kind) {
     case SeedKind::kPoints:
       in.seed_kind = FieldMemoryInput::SeedKind::kPoints;
