@@ -4,6 +4,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
@@ -110,7 +111,7 @@ struct BrickRef {
 };
 Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const BrickDims& dims, Pool& pool, bool all_fresh) {
   const int o0 = axis == 0 ? 1 : 0, o1 = axis == 2 ? 1 : 2;  // the other two axes, ascending
-  std::sort(bricks.begin(), bricks.end(), [&](const BrickRef& a, const BrickRef& b) {
+  tbb::parallel_sort(bricks.begin(), bricks.end(), [&](const BrickRef& a, const BrickRef& b) {
     return std::tie(a.c[o1], a.c[o0], a.c[axis]) < std::tie(b.c[o1], b.c[o0], b.c[axis]);
   });
   Runs r;
@@ -387,7 +388,7 @@ bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask,
   bricks = liveBricks(runs, 2, pool);
   std::vector<std::pair<uint64_t, uint32_t>> order(bricks.size());
   for (size_t i = 0; i < bricks.size(); ++i) order[i] = {bdims.key(bricks[i].c), bricks[i].slot};
-  std::sort(order.begin(), order.end());
+  tbb::parallel_sort(order.begin(), order.end());
   out->keys.resize(order.size());
   out->values.resize(order.size());
   for (size_t i = 0; i < order.size(); ++i) {

@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include "core/separable_band.h"
 #include "core/separable_lines.h"
@@ -282,7 +283,7 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
         if (!inside_negative)
           for (size_t b = 0; b < kinds.size(); ++b)
             if (kinds[b] != 0) keys.push_back(b);
-        std::sort(keys.begin(), keys.end());
+        tbb::parallel_sort(keys.begin(), keys.end());
         keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
         source.outside.reserve(keys.size());
         source.inside.reserve(keys.size());
