@@ -100,8 +100,9 @@ class BrickTable {
   }
   /// The brick at brick coordinate `bc`, null outside the grid or untouched.
   BrickState* brickAt(const Coord& bc) const {
-    const uint32_t id = idAt(bc);
-    return id == kNoBrick ? nullptr : get(id);
+    if (!containsBrick(bc)) return nullptr;
+    const Block* b = blockAt(bc);
+    return b ? b->slots[localIndex(bc)].load(std::memory_order_relaxed) : nullptr;
   }
   /// The brick holding voxel `c` (inside the grid), null if untouched.
   BrickState* find(const Coord& c) const { return brickAt({c.x >> kBrickLog2, c.y >> kBrickLog2, c.z >> kBrickLog2}); }

@@ -6,6 +6,55 @@
 #include "core/engine/emission.h"
 
 namespace distband::engine {
+namespace {
+
+// Inlined into checkVoxel, its hot caller (a call per checked voxel cost ~3 % of a correction-heavy run).
+[[gnu::always_inline]] inline void gatherBlockInline(const BandState& s, const Coord& q, uint64_t* block) {
+  // Per axis: is the coordinate inside the grid, which of the (at most two) bricks holds it, its local index.
+  int bsel[3][5], local[3][5];
+  bool valid[3][5];
+  const int qc[3] = {q.x, q.y, q.z}, dims[3] = {s.dims.x, s.dims.y, s.dims.z};
+  int b0[3];
+  for (int a = 0; a < 3; ++a) {
+    b0[a] = (qc[a] - 2) >> kBrickLog2;
+    for (int i = 0; i < 5; ++i) {
+      const int c = qc[a] + i - 2;
+      valid[a][i] = c >= 0 && c < dims[a];
+      bsel[a][i] = (c >> kBrickLog2) - b0[a];
+      local[a][i] = c & 7;
+    }
+  }
+  BrickState* bricks[2][2][2];
+  for (int a = 0; a < 2; ++a)
+    for (int b = 0; b < 2; ++b)
+      for (int c = 0; c < 2; ++c) bricks[a][b][c] = s.table.brickAt({b0[0] + c, b0[1] + b, b0[2] + a});
+  const uint8_t region = s.regionOf(q);
+  int j = 0;
+  for (int iz = 0; iz < 5; ++iz)
+    for (int iy = 0; iy < 5; ++iy) {
+      if (!valid[2][iz] || !valid[1][iy]) {
+        for (int ix = 0; ix < 5; ++ix) block[j++] = kUntouched;
+        continue;
+      }
+      BrickState* const* row = bricks[bsel[2][iz]][bsel[1][iy]];
+      const int yz = (local[1][iy] << 3) | local[2][iz];
+      for (int ix = 0; ix < 5; ++ix, ++j) {
+        BrickState* nb = row[bsel[0][ix]];
+        uint64_t nk = kUntouched;
+        if (valid[0][ix] && nb) {
+          nk = nb->key[(local[0][ix] << 6) | yz].load(std::memory_order_relaxed);
+          if (keySite(nk) == kNoSiteKey ||
+              (s.region && s.regionOf({q.x + ix - 2, q.y + iy - 2, q.z + iz - 2}) != region))
+            nk = kUntouched;
+        }
+        block[j] = nk;
+      }
+    }
+}
+
+}  // namespace
+
+void gatherBlock(const BandState& s, const Coord& q, uint64_t* block) { gatherBlockInline(s, q, block); }
 
 bool isBoundary(const BandState& s, const Coord& q, uint64_t k) {
   const uint8_t region = s.regionOf(q);
@@ -100,7 +149,7 @@ void scanAndCheck(BandState& s) {
 
 void checkVoxel(const BandState& s, const VoxelRef& v, const Coord& q, uint64_t k, uint64_t* block,
                 ThreadBuffers& tb) {
-  gatherBlock(s, q, block);
+  gatherBlockInline(s, q, block);
   uint64_t best = k;
   uint32_t last_site = keySite(k);
   for (int j = 0; j < 125; ++j) {
@@ -131,12 +180,17 @@ FrontList correct(BandState& s, bool first_round) {
         for (size_t i = r.begin(); i != r.end(); ++i) {
           if (s.stoppingAt(i, 16)) return;
           const Coord c = s.table.originOf(dirty[i].brick) + brickLocal(dirty[i].offset);
+          // The block spans at most two bricks per axis: look the (up to) eight up once.
+          const Coord b0{(c.x - 2) >> kBrickLog2, (c.y - 2) >> kBrickLog2, (c.z - 2) >> kBrickLog2};
+          uint32_t ids[8];
+          for (int j = 0; j < 8; ++j) ids[j] = s.table.idAt({b0.x + (j & 1), b0.y + ((j >> 1) & 1), b0.z + (j >> 2)});
           for (int dz = -2; dz <= 2; ++dz)
             for (int dy = -2; dy <= 2; ++dy)
               for (int dx = -2; dx <= 2; ++dx) {
                 const Coord q{c.x + dx, c.y + dy, c.z + dz};
                 if (!s.grid.contains(q)) continue;
-                const uint32_t bi = s.table.idAt({q.x >> kBrickLog2, q.y >> kBrickLog2, q.z >> kBrickLog2});
+                const uint32_t bi = ids[(((q.z >> kBrickLog2) - b0.z) << 2) | (((q.y >> kBrickLog2) - b0.y) << 1) |
+                                        ((q.x >> kBrickLog2) - b0.x)];
                 BrickState* b = bi == BrickTable::kNoBrick ? nullptr : s.table.get(bi);
                 if (!b) continue;
                 const int off = brickOffset(q.x & 7, q.y & 7, q.z & 7);
@@ -176,47 +230,5 @@ FrontList correct(BandState& s, bool first_round) {
   return front;
 }
 
-void gatherBlock(const BandState& s, const Coord& q, uint64_t* block) {
-  // Per axis: is the coordinate inside the grid, which of the (at most two) bricks holds it, its local index.
-  int bsel[3][5], local[3][5];
-  bool valid[3][5];
-  const int qc[3] = {q.x, q.y, q.z}, dims[3] = {s.dims.x, s.dims.y, s.dims.z};
-  int b0[3];
-  for (int a = 0; a < 3; ++a) {
-    b0[a] = (qc[a] - 2) >> kBrickLog2;
-    for (int i = 0; i < 5; ++i) {
-      const int c = qc[a] + i - 2;
-      valid[a][i] = c >= 0 && c < dims[a];
-      bsel[a][i] = (c >> kBrickLog2) - b0[a];
-      local[a][i] = c & 7;
-    }
-  }
-  BrickState* bricks[2][2][2];
-  for (int a = 0; a < 2; ++a)
-    for (int b = 0; b < 2; ++b)
-      for (int c = 0; c < 2; ++c) bricks[a][b][c] = s.table.brickAt({b0[0] + c, b0[1] + b, b0[2] + a});
-  const uint8_t region = s.regionOf(q);
-  int j = 0;
-  for (int iz = 0; iz < 5; ++iz)
-    for (int iy = 0; iy < 5; ++iy) {
-      if (!valid[2][iz] || !valid[1][iy]) {
-        for (int ix = 0; ix < 5; ++ix) block[j++] = kUntouched;
-        continue;
-      }
-      BrickState* const* row = bricks[bsel[2][iz]][bsel[1][iy]];
-      const int yz = (local[1][iy] << 3) | local[2][iz];
-      for (int ix = 0; ix < 5; ++ix, ++j) {
-        BrickState* nb = row[bsel[0][ix]];
-        uint64_t nk = kUntouched;
-        if (valid[0][ix] && nb) {
-          nk = nb->key[(local[0][ix] << 6) | yz].load(std::memory_order_relaxed);
-          if (keySite(nk) == kNoSiteKey ||
-              (s.region && s.regionOf({q.x + ix - 2, q.y + iy - 2, q.z + iz - 2}) != region))
-            nk = kUntouched;
-        }
-        block[j] = nk;
-      }
-    }
-}
 
 }  // namespace distband::engine

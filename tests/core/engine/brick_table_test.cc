@@ -9,11 +9,12 @@
 #include <fstream>
 #include <random>
 #include <set>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 namespace distband::engine {
 namespace {
@@ -84,18 +85,37 @@ TEST(BrickTable, ConcurrentCreatorsGetOneBrick) {
   const Coord bc{1000, 17, 2047};
   std::vector<BrickState*> got(20000, nullptr);
   std::atomic<int64_t> created{0};
-  tbb::task_arena arena(4);
-  arena.execute([&] {
-    tbb::parallel_for(size_t(0), got.size(), [&](size_t i) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, got.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
       int64_t mine = 0;
       got[i] = table.getOrCreate(table.idOf(bc, true), &mine);  // the super-block is raced for too
       created += mine;
-    });
+    }
   });
   EXPECT_EQ(created.load(), 1);
   EXPECT_EQ(table.blockCount(), 1u);
   for (BrickState* b : got) ASSERT_EQ(b, got[0]);
   EXPECT_EQ(table.brickAt(bc), got[0]);
+  // Many bricks over a few super-blocks, each created by many threads at once: one brick per coordinate.
+  std::vector<Coord> coords;
+  for (int i = 0; i < 500; ++i) coords.push_back({(i * 37) % 48, (i * 11) % 40, 2000 + (i * 7) % 48});
+  std::vector<BrickState*> many(20000, nullptr);
+  created = 0;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, many.size(), 8), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      int64_t mine = 0;
+      many[i] = table.getOrCreate(table.idOf(coords[i % coords.size()], true), &mine);
+      created += mine;
+    }
+  });
+  std::set<std::tuple<int, int, int>> distinct;
+  for (const Coord& c : coords) distinct.insert({c.x, c.y, c.z});
+  EXPECT_EQ(created.load(), int64_t(distinct.size()));
+  for (size_t i = 0; i < many.size(); ++i) {
+    const Coord& c = coords[i % coords.size()];
+    ASSERT_EQ(many[i], table.brickAt(c));
+    ASSERT_EQ(many[i]->origin, (Coord{c.x * 8, c.y * 8, c.z * 8}));
+  }
 }
 
 TEST(BrickTable, NeighbourIdsAgreeWithTheMapAcrossSuperBlocks) {
