@@ -131,7 +131,9 @@ struct BandState {
     return b ? b->key[brickOffset(c.x & 7, c.y & 7, c.z & 7)].load(std::memory_order_relaxed) : kUntouched;
   }
   /// The brick id of a voxel inside the grid, its super-block created if needed.
-  uint32_t brickIdOf(const Coord& c) { return table.idOf({c.x >> kBrickLog2, c.y >> kBrickLog2, c.z >> kBrickLog2}, true); }
+  uint32_t brickIdOf(const Coord& c) {
+    return table.idOf({c.x >> kBrickLog2, c.y >> kBrickLog2, c.z >> kBrickLog2}, true);
+  }
 
   // The paper's lifespan, t_max = (1 + alpha) * t_min, with t_min taken from the voxel's first distance beyond the
   // segment's lower bound (t_min = distance / longest link) rather than from its first-touch step. The two agree

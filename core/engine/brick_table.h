@@ -91,6 +91,27 @@ class BrickTable {
     return idOf(n, true);
   }
 
+  /// neighbourId for the propagation's hot path: also the neighbour's slot (null outside the grid), found from the
+  /// slot `from` of brick `id` when both share a super-block (their slots are contiguous there).
+  std::atomic<BrickState*>* neighbourSlot(uint32_t id, std::atomic<BrickState*>* from, const Coord& bc, int dx, int dy,
+                                          int dz, uint32_t* neighbour_id) {
+    const int lx = (bc.x & (kBlockSize - 1)) + dx, ly = (bc.y & (kBlockSize - 1)) + dy,
+              lz = (bc.z & (kBlockSize - 1)) + dz;
+    if (uint32_t(lx) < uint32_t(kBlockSize) && uint32_t(ly) < uint32_t(kBlockSize) &&
+        uint32_t(lz) < uint32_t(kBlockSize)) {
+      // Not below the grid (the super-block starts inside it), but maybe past its far faces.
+      if (bc.x + dx >= bdims_.x || bc.y + dy >= bdims_.y || bc.z + dz >= bdims_.z) {
+        *neighbour_id = kNoBrick;
+        return nullptr;
+      }
+      const int delta = ((dz << kBlockLog2) + dy) * kBlockSize + dx;
+      *neighbour_id = uint32_t(int(id) + delta);
+      return from + delta;
+    }
+    *neighbour_id = idOf({bc.x + dx, bc.y + dy, bc.z + dz}, true);
+    return *neighbour_id == kNoBrick ? nullptr : &slot(*neighbour_id);
+  }
+
   /// The slot holding brick `id` (null until created). `id` must come from idOf / idAt / neighbourId.
   std::atomic<BrickState*>& slot(uint32_t id) const {
     return blocks_[id >> (3 * kBlockLog2)]->slots[id & (kBlockBricks - 1)];

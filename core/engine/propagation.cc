@@ -40,7 +40,8 @@ template <bool kPoints, bool kExactBand>
 void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb) {
   // Members copied to locals: the atomics and buffer writes below would otherwise force reloads every link.
   BrickTable& table = s.table;
-  BrickState* const pb = table.get(e.brick);
+  std::atomic<BrickState*>* const pslot = &table.slot(e.brick);
+  BrickState* const pb = pslot->load(std::memory_order_relaxed);
   const Coord l = brickLocal(e.offset);
   const Coord p = pb->origin + l;
   const uint32_t site = e.site;
@@ -128,9 +129,8 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb) {
     if (d.brick != 13) {
       if (!(known & (1u << d.brick))) {
         known |= 1u << d.brick;
-        const uint32_t id = table.neighbourId(e.brick, bcoord, d.brick % 3 - 1, (d.brick / 3) % 3 - 1, d.brick / 9 - 1);
-        nbr_index[d.brick] = id;
-        nbr_slot[d.brick] = id == BrickTable::kNoBrick ? nullptr : &table.slot(id);
+        nbr_slot[d.brick] = table.neighbourSlot(e.brick, pslot, bcoord, d.brick % 3 - 1, (d.brick / 3) % 3 - 1,
+                                                d.brick / 9 - 1, &nbr_index[d.brick]);
       }
       gbi = nbr_index[d.brick];
       if (gbi == BrickTable::kNoBrick) continue;
@@ -281,7 +281,8 @@ FrontList takeDeferred(BandState& s) {
 }
 
 void rearmLifespans(BandState& s) {
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, s.pending_bricks.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+  const size_t n = s.pending_bricks.size();
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) {
       if (s.stoppingAt(i, 64)) return;
       BrickState* b = s.table.get(s.pending_bricks[i]);

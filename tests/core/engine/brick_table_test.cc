@@ -129,7 +129,12 @@ TEST(BrickTable, NeighbourIdsAgreeWithTheMapAcrossSuperBlocks) {
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
           const Coord n{bc.x + dx, bc.y + dy, bc.z + dz};
-          ASSERT_EQ(table.neighbourId(id, bc, dx, dy, dz), table.idOf(n, true)) << bc.x << "," << bc.y << "," << bc.z;
+          const uint32_t expect = table.idOf(n, true);
+          ASSERT_EQ(table.neighbourId(id, bc, dx, dy, dz), expect) << bc.x << "," << bc.y << "," << bc.z;
+          uint32_t got = 0;
+          ASSERT_EQ(table.neighbourSlot(id, &table.slot(id), bc, dx, dy, dz, &got),
+                    expect == BrickTable::kNoBrick ? nullptr : &table.slot(expect));
+          ASSERT_EQ(got, expect);
         }
   }
 }

@@ -18,7 +18,8 @@ namespace distband::engine {
 namespace {
 
 struct Fixture {
-  Grid grid{{0, 0, 0}, 0.5, {64, 48, 40}};
+  // Several super-blocks of the brick table along x and z, created in random order: ids do not follow origins.
+  Grid grid{{0, 0, 0}, 0.5, {280, 48, 150}};
   Seeds seeds;
   EngineOptions opt;
   Fixture() {
@@ -55,7 +56,7 @@ TEST(Emission, SegmentsDeliverEachVoxelOnceInOriginOrder) {
   std::map<std::tuple<int, int, int>, int> delivered;
   std::vector<SegmentBricks> segments;
   auto cb = [&](SegmentBricks&& seg) { segments.push_back(std::move(seg)); };
-  const double bounds[] = {10.0, 25.0};  // voxels; the farthest voxel is ~42 away
+  const double bounds[] = {30.0, 120.0};  // voxels; the farthest voxel is ~280 away
   for (int seg = 0; seg < 3; ++seg) {
     const double upper = seg < 2 ? bounds[seg] : INFINITY;
     s.thr2 = std::isfinite(upper) ? float(upper * upper) : INFINITY;

@@ -19,7 +19,9 @@ namespace {
 constexpr StencilKind kAll[] = {StencilKind::kCubic6, StencilKind::kCubic18, StencilKind::kCubic26,
                                 StencilKind::kFcc12};
 
-bool inStencil(const Stencil& s, const Coord& v) { return std::find(s.links.begin(), s.links.end(), v) != s.links.end(); }
+bool inStencil(const Stencil& s, const Coord& v) {
+  return std::find(s.links.begin(), s.links.end(), v) != s.links.end();
+}
 
 size_t indexOf(const Stencil& s, const Coord& v) {
   return size_t(std::find(s.links.begin(), s.links.end(), v) - s.links.begin());

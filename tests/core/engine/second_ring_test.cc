@@ -98,7 +98,8 @@ TEST(SecondRing, CheckVoxelFindsABetterSiteTwoVoxelsAway) {
 }
 
 // Squared-distance field of an engine run (point seeds), -1 where nothing was delivered.
-std::vector<double> runField(const Grid& grid, const std::vector<Vec3d>& points, bool second_ring, int64_t* corrections) {
+std::vector<double> runField(const Grid& grid, const std::vector<Vec3d>& points, bool second_ring,
+                             int64_t* corrections) {
   Seeds seeds;
   EXPECT_EQ(makePointSeeds(grid, points, &seeds), "");
   EngineOptions opt;
