@@ -125,6 +125,28 @@ class BrickTable {
     const Block* b = blockAt(bc);
     return b ? b->slots[localIndex(bc)].load(std::memory_order_relaxed) : nullptr;
   }
+  /// The 2x2x2 bricks from brick coordinate `b0` on: bricks[(z << 2) | (y << 1) | x] is the one at b0 + (x, y, z)
+  /// (null outside the grid or untouched), and (if `ids` is given) its id (kNoBrick without one). One map lookup
+  /// when all eight share a super-block (most of the time), else one each.
+  void bricksFrom(const Coord& b0, BrickState* bricks[8], uint32_t ids[8]) const {
+    constexpr int m = kBlockSize - 1;
+    if (b0.x >= 0 && b0.y >= 0 && b0.z >= 0 && (b0.x & m) < m && (b0.y & m) < m && (b0.z & m) < m &&
+        b0.x + 1 < bdims_.x && b0.y + 1 < bdims_.y && b0.z + 1 < bdims_.z) {
+      const Block* block = blockAt(b0);
+      const uint32_t first = localIndex(b0);
+      for (int j = 0; j < 8; ++j) {
+        const uint32_t local = first + uint32_t((((j >> 2) << kBlockLog2) + ((j >> 1) & 1)) * kBlockSize + (j & 1));
+        bricks[j] = block ? block->slots[local].load(std::memory_order_relaxed) : nullptr;
+        if (ids) ids[j] = block ? (block->number << (3 * kBlockLog2)) | local : kNoBrick;
+      }
+      return;
+    }
+    for (int j = 0; j < 8; ++j) {
+      const uint32_t id = idAt({b0.x + (j & 1), b0.y + ((j >> 1) & 1), b0.z + (j >> 2)});
+      bricks[j] = id == kNoBrick ? nullptr : get(id);
+      if (ids) ids[j] = id;
+    }
+  }
   /// The brick holding voxel `c` (inside the grid), null if untouched.
   BrickState* find(const Coord& c) const { return brickAt({c.x >> kBrickLog2, c.y >> kBrickLog2, c.z >> kBrickLog2}); }
 

@@ -25,9 +25,7 @@ namespace {
     }
   }
   BrickState* bricks[2][2][2];
-  for (int a = 0; a < 2; ++a)
-    for (int b = 0; b < 2; ++b)
-      for (int c = 0; c < 2; ++c) bricks[a][b][c] = s.table.brickAt({b0[0] + c, b0[1] + b, b0[2] + a});
+  s.table.bricksFrom({b0[0], b0[1], b0[2]}, &bricks[0][0][0], nullptr);
   const uint8_t region = s.regionOf(q);
   int j = 0;
   for (int iz = 0; iz < 5; ++iz)
@@ -181,22 +179,38 @@ FrontList correct(BandState& s, bool first_round) {
         for (size_t i = r.begin(); i != r.end(); ++i) {
           if (s.stoppingAt(i, 16)) return;
           const Coord c = s.table.originOf(dirty[i].brick) + brickLocal(dirty[i].offset);
-          // The block spans at most two bricks per axis: look the (up to) eight up once.
-          const Coord b0{(c.x - 2) >> kBrickLog2, (c.y - 2) >> kBrickLog2, (c.z - 2) >> kBrickLog2};
+          // The 5^3 block spans at most two bricks per axis: look the (up to) eight up once (no brick is created or
+          // freed during a correction round), and per axis which of them and where in it each coordinate lies.
+          const int qc[3] = {c.x, c.y, c.z}, dims[3] = {s.dims.x, s.dims.y, s.dims.z};
+          int b0[3], sel[3][5], local[3][5];
+          bool valid[3][5];
+          for (int a = 0; a < 3; ++a) {
+            b0[a] = (qc[a] - 2) >> kBrickLog2;
+            for (int j = 0; j < 5; ++j) {
+              const int v = qc[a] + j - 2;
+              valid[a][j] = v >= 0 && v < dims[a];
+              sel[a][j] = (v >> kBrickLog2) - b0[a];
+              local[a][j] = v & 7;
+            }
+          }
           uint32_t ids[8];
-          for (int j = 0; j < 8; ++j) ids[j] = s.table.idAt({b0.x + (j & 1), b0.y + ((j >> 1) & 1), b0.z + (j >> 2)});
-          for (int dz = -2; dz <= 2; ++dz)
-            for (int dy = -2; dy <= 2; ++dy)
-              for (int dx = -2; dx <= 2; ++dx) {
-                const Coord q{c.x + dx, c.y + dy, c.z + dz};
-                if (!s.grid.contains(q)) continue;
-                const uint32_t bi = ids[(((q.z >> kBrickLog2) - b0.z) << 2) | (((q.y >> kBrickLog2) - b0.y) << 1) |
-                                        ((q.x >> kBrickLog2) - b0.x)];
-                BrickState* b = bi == BrickTable::kNoBrick ? nullptr : s.table.get(bi);
+          BrickState* bricks[8];
+          s.table.bricksFrom({b0[0], b0[1], b0[2]}, bricks, ids);
+          for (int iz = 0; iz < 5; ++iz) {
+            if (!valid[2][iz]) continue;
+            for (int iy = 0; iy < 5; ++iy) {
+              if (!valid[1][iy]) continue;
+              for (int ix = 0; ix < 5; ++ix) {
+                if (!valid[0][ix]) continue;
+                const int j = (sel[2][iz] << 2) | (sel[1][iy] << 1) | sel[0][ix];
+                BrickState* b = bricks[j];
                 if (!b) continue;
-                const int off = brickOffset(q.x & 7, q.y & 7, q.z & 7);
-                if (b->key[off].load(std::memory_order_relaxed) != kUntouched) visit(b, bi, off, q);
+                const int off = brickOffset(local[0][ix], local[1][iy], local[2][iz]);
+                if (b->key[off].load(std::memory_order_relaxed) != kUntouched)
+                  visit(b, ids[j], off, Coord{c.x + ix - 2, c.y + iy - 2, c.z + iz - 2});
               }
+            }
+          }
         }
       });
     };

@@ -139,6 +139,28 @@ TEST(BrickTable, NeighbourIdsAgreeWithTheMapAcrossSuperBlocks) {
   }
 }
 
+TEST(BrickTable, BricksFromAgreesWithSingleLookups) {
+  BrickTable table({40, 33, 17}, false);
+  std::mt19937 rng(5);
+  int64_t created = 0;
+  for (int i = 0; i < 2000; ++i) {
+    const Coord bc{int(rng() % 40), int(rng() % 33), int(rng() % 17)};
+    table.getOrCreate(table.idOf(bc, true), &created);
+  }
+  std::vector<Coord> probes = {{-1, -1, -1}, {15, 15, 15}, {14, 14, 14}, {39, 32, 16}, {31, 0, 15}, {38, 31, 15}};
+  for (int i = 0; i < 500; ++i) probes.push_back({int(rng() % 42) - 1, int(rng() % 35) - 1, int(rng() % 19) - 1});
+  for (const Coord& b0 : probes) {
+    BrickState* bricks[8];
+    uint32_t ids[8];
+    table.bricksFrom(b0, bricks, ids);
+    for (int j = 0; j < 8; ++j) {
+      const Coord bc{b0.x + (j & 1), b0.y + ((j >> 1) & 1), b0.z + (j >> 2)};
+      ASSERT_EQ(bricks[j], table.brickAt(bc)) << bc.x << "," << bc.y << "," << bc.z;
+      ASSERT_EQ(ids[j], table.idAt(bc)) << bc.x << "," << bc.y << "," << bc.z;
+    }
+  }
+}
+
 TEST(BrickTable, OriginKeyOrdersByZThenYThenX) {
   const std::vector<Coord> sorted = {{8, 0, 0}, {16376, 0, 0}, {0, 8, 0}, {16376, 16376, 0}, {0, 0, 8},
                                      {8, 0, 8}, {0, 16376, 8}, {0, 0, 16376}, {16376, 16376, 16376}};
