@@ -4,12 +4,14 @@
 //     over super-blocks of 16^3 bricks (a lazily zeroed array, 8 bytes per 128^3 voxels of the grid) and, per touched
 //     super-block, 4096 brick slots (32 KiB). Ids are (super-block number << 12 | brick within it), super-blocks
 //     numbered in creation order, so ids say nothing about position: order bricks by originKey().
-//   * Memory follows the touched bricks: a 16384^3 grid costs 16 MiB of address space and a page per touched
-//     super-block before any brick exists.
-//   * Lookups (find, brickAt, idAt, get, slot) are lock-free loads. idOf(..., create) and getOrCreate() may be called
-//     from any number of threads: a super-block is created under a mutex (once per 128^3 voxels), a brick by CAS, so
-//     concurrent creators of one brick all get the same one. release() and releaseAll() must not race with users of
-//     the bricks they free.
+//   * Memory follows the touched bricks: a 16384^3 grid costs 24 MiB of address space (the top level and the
+//     super-block directory, both lazily zeroed) and, per touched super-block, its 32 KiB of slots and at most a page
+//     of each array. The propagation creates the super-blocks of the neighbouring bricks it looks at (idOf with
+//     create), so a band along a super-block face may touch the one beyond it without a brick there.
+//   * Lookups (find, brickAt, bricksFrom, idAt, get, slot) are lock-free loads. idOf(..., create), neighbourId,
+//     neighbourSlot and getOrCreate() may be called from any number of threads: a super-block is created under a
+//     mutex (once per 128^3 voxels), a brick by CAS, so concurrent creators of one brick all get the same one.
+//     release() and releaseAll() must not race with users of the bricks they free.
 // Used by every part of the engine (core/engine/).
 #pragma once
 
@@ -182,10 +184,10 @@ class BrickTable {
   /// Frees every brick (in parallel); returns how many there were. Super-blocks stay until destruction.
   size_t releaseAll();
 
-  /// Super-blocks created so far, and the bytes the map itself holds (their slots; the top level's touched pages
-  /// are at most one per super-block).
+  /// Super-blocks created so far, and the bytes the map itself holds at most (their slots, and a page of the top
+  /// level and of the directory for each).
   size_t blockCount() const { return block_count_.load(std::memory_order_acquire); }
-  size_t mapBytes() const { return blockCount() * (sizeof(Block) + 4096); }
+  size_t mapBytes() const { return blockCount() * (sizeof(Block) + 2 * 4096); }
 
  private:
   struct Block {
