@@ -1,0 +1,298 @@
+#include "core/engine/propagation.h"
+
+#include <optional>
+#include <stdexcept>
+#include <tuple>
+
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include "core/interruptible.h"
+
+namespace distband::engine {
+
+bool offer(BandState& s, BrickState* b, uint32_t bi, int off, uint64_t newkey, bool propagates, ThreadBuffers& tb) {
+  uint64_t k = b->key[off].load(std::memory_order_relaxed);
+  while (newkey < k) {
+    if (b->key[off].compare_exchange_weak(k, newkey, std::memory_order_relaxed)) {
+      ++tb.updates;
+      if (k == kUntouched) {
+        if (s.lifespan.enabled) b->expiry[off].store(s.expiryFor(keyDist2(newkey)), std::memory_order_relaxed);
+        if (!b->pending.load(std::memory_order_relaxed) && !b->pending.exchange(true)) tb.pending.push_back(bi);
+      }
+      if (s.collect_dirty && !b->dirty.test(off) && b->dirty.set(off)) tb.dirty.push_back({bi, uint16_t(off)});
+      // Listed once per step. Two threads lowering the same voxel at once may both list it: the duplicate
+      // offers the same snapshot site twice, which changes nothing.
+      if (propagates && !b->listed.test(off) && b->listed.set(off)) {
+        tb.next.push_back({bi, uint16_t(off), 0, 0});
+      }
+      return true;
+    }
+  }
+  return false;
+}
+
+namespace {
+
+template <bool kPoints, bool kExactBand>
+void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb) {
+  // Members copied to locals: the atomics and buffer writes below would otherwise force reloads every link.
+  BrickTable& table = s.table;
+  std::atomic<BrickState*>* const pslot = &table.slot(e.brick);
+  BrickState* const pb = pslot->load(std::memory_order_relaxed);
+  const Coord l = brickLocal(e.offset);
+  const Coord p = pb->origin + l;
+  const uint32_t site = e.site;
+  const uint8_t* const region_map = s.region;
+  const uint8_t region = s.regionOf(p);
+  const Coord dims = s.dims;
+  const uint32_t dx = uint32_t(dims.x), dy = uint32_t(dims.y), dz = uint32_t(dims.z);
+  const float admit2 = s.admit2, frozen2 = s.frozen2;
+  const bool lifespan = s.lifespan.enabled, defer = s.defer;
+  const int step = s.step;
+  const Stencil& stencil = s.stencil;
+  // Point sites: the offset from the site to p, so a neighbour's squared distance is three multiply-adds.
+  Vec3d rel{};
+  const Coord ps = p + s.seeds.site_offset;  // p in the sites' index space (the grid this one may be a window of)
+  if constexpr (kPoints) rel = Vec3d{double(ps.x), double(ps.y), double(ps.z)} - s.seeds.points[site];
+  // Triangle sites: one precomputed triangle for every neighbour, and its plane (a lower bound, below).
+  std::optional<TriangleDistance> tri;
+  Vec3d plane_point{}, unit_normal{};
+  if constexpr (!kPoints) {
+    const auto& t = s.seeds.triangles[site];
+    tri.emplace(t[0], t[1], t[2]);
+    const Vec3d n = (t[1] - t[0]).cross(t[2] - t[0]);
+    const double len2 = n.lengthSqr();
+    plane_point = t[0];
+    unit_normal = len2 > 0 ? n * (1.0 / std::sqrt(len2)) : Vec3d{};  // degenerate: bound 0, never rejects
+  }
+  // Only a brick reaching past the grid's far faces needs per-voxel bounds checks (the near faces are brick
+  // faces, handled by the neighbouring-brick lookup).
+  const bool edge = pb->origin.x + kBrickSize > dims.x || pb->origin.y + kBrickSize > dims.y ||
+                    pb->origin.z + kBrickSize > dims.z;
+  // The 3x3x3 neighbouring bricks, looked up once each on demand: their ids and slots (a slot is re-read for every
+  // link, since another thread may create the brick meanwhile).
+  uint32_t nbr_index[27];
+  std::atomic<BrickState*>* nbr_slot[27];
+  uint32_t known = 1u << 13;  // bit i: nbr_index[i] valid; 13 is this brick
+  nbr_index[13] = e.brick;
+  const Coord bcoord{pb->origin.x >> kBrickLog2, pb->origin.y >> kBrickLog2, pb->origin.z >> kBrickLog2};
+  bool deferred = false;
+  // Decides on one target whose key was read as k.
+  auto decide = [&](const Link& d, BrickState* gb, uint32_t gbi, uint64_t k) {
+    const int goff = e.offset + d.offset;
+    // The same site gives the same distance: nothing to offer (exact band voxels were skipped before their key).
+    if (k != kUntouched && keySite(k) == site) return;
+    float d2;
+    if constexpr (kPoints) {
+      const double x = rel.x + d.fx, y = rel.y + d.fy, z = rel.z + d.fz;
+      d2 = float(x * x + y * y + z * z);
+    } else {
+      const Vec3d g{double(ps.x + d.x), double(ps.y + d.y), double(ps.z + d.z)};
+      // The plane's distance bounds the triangle's from below: an offer it already shows to be worse is
+      // rejected without the full test (float rounding is monotone, so the outcome is the same).
+      const double plane = unit_normal.dot(g - plane_point);
+      if (k != kUntouched && float(plane * plane) > keyDist2(k)) return;
+      d2 = float(tri->dist2(g));
+    }
+    const uint64_t newkey = packKey(d2, d.dir, site);
+    if (k != kUntouched) {
+      if (newkey >= k || keyDist2(k) <= frozen2) return;  // no better, or final (delivered)
+      if (lifespan && step > gb->expiry[goff].load(std::memory_order_relaxed)) return;  // FINISHED
+    }
+    if (d2 > admit2) {
+      deferred |= defer;
+      return;
+    }
+    if (!gb) gb = table.getOrCreate(gbi, &tb.bricks);
+    offer(s, gb, gbi, goff, newkey, d.propagates_to || stencil.propagates({p.x + d.x, p.y + d.y, p.z + d.z}), tb);
+  };
+  // Triangle sites: phase 1 gathers every target's brick and key with independent loads, so their cache misses
+  // overlap; phase 2 decides on them (keys may change in between: offer() re-checks, and a stale key only costs a
+  // test a fresh one would have skipped). Point sites decide at once: their test is so cheap that the gathering
+  // cost more than it saved (+50 % instructions in the push).
+  struct Target {
+    const Link* link;
+    BrickState* brick;
+    uint32_t brick_index;
+    uint64_t key;
+  };
+  Target targets[32];
+  int count = 0;
+  for (const Link& d : s.links.linksFor(l, e.dir)) {
+    if (edge && (uint32_t(p.x + d.x) >= dx || uint32_t(p.y + d.y) >= dy || uint32_t(p.z + d.z) >= dz)) continue;
+    const int goff = e.offset + d.offset;
+    BrickState* gb = pb;
+    uint32_t gbi = e.brick;
+    if (d.brick != 13) {
+      if (!(known & (1u << d.brick))) {
+        known |= 1u << d.brick;
+        nbr_slot[d.brick] = table.neighbourSlot(e.brick, pslot, bcoord, d.brick % 3 - 1, (d.brick / 3) % 3 - 1,
+                                                d.brick / 9 - 1, &nbr_index[d.brick]);
+      }
+      gbi = nbr_index[d.brick];
+      if (gbi == BrickTable::kNoBrick) continue;
+      gb = nbr_slot[d.brick]->load(std::memory_order_acquire);
+    }
+    if (kExactBand && gb && gb->exact.test(goff)) continue;
+    if (region_map && region_map[s.grid.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
+    const uint64_t k = gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched;
+    if constexpr (kPoints) decide(d, gb, gbi, k);
+    else targets[count++] = {&d, gb, gbi, k};
+  }
+  for (int i = 0; i < count; ++i) decide(*targets[i].link, targets[i].brick, targets[i].brick_index, targets[i].key);
+  if (deferred) tb.deferred.push_back({e.brick, e.offset, uint8_t(kNoDirection), site});
+}
+
+}  // namespace
+
+// Specialised on the site kind and on whether the band is exact: the exact-band test on every link cost point seeds
+// ~5 % of the push's instructions when compiled in unconditionally.
+void pushFrom(BandState& s, const FrontEntry& e, ThreadBuffers& tb) {
+  const bool exact = s.seeds.band_exact;
+  if (s.seeds.kind == SiteKind::kPoint) exact ? pushFromT<true, true>(s, e, tb) : pushFromT<true, false>(s, e, tb);
+  else exact ? pushFromT<false, true>(s, e, tb) : pushFromT<false, false>(s, e, tb);
+}
+
+void insertBand(BandState& s) {
+  const auto& band = s.seeds.band;
+  if (s.seeds.siteCount() >= kMaxSites)
+    throw std::invalid_argument(fmt::format("too many sites ({}; at most {})", s.seeds.siteCount(), kMaxSites - 1));
+  const double admit_limit = s.limit_vox + kLimitSlackVoxels;
+  const float limit2 = std::isfinite(admit_limit) ? float(admit_limit * admit_limit) : INFINITY;
+  for (const BandVoxel& v : band) {
+    if (!s.grid.contains(v.voxel))
+      throw std::invalid_argument(fmt::format("band voxel ({},{},{}) lies outside the grid", v.voxel.x, v.voxel.y,
+                                              v.voxel.z));
+    if (v.site != kNoSite && v.site >= s.seeds.siteCount())
+      throw std::invalid_argument(fmt::format("band voxel names site {} of {}", v.site, s.seeds.siteCount()));
+  }
+  s.step = 0;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    ThreadBuffers& tb = s.buffers.local();
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (s.stoppingAt(i, 1024)) return;
+      const BandVoxel& v = band[i];
+      const uint32_t site = toKeySite(v.site);
+      const float d2 = s.metric.key2(site, v.voxel.x, v.voxel.y, v.voxel.z);
+      if (d2 > limit2) continue;
+      const uint32_t bi = s.brickIdOf(v.voxel);
+      BrickState* b = s.table.getOrCreate(bi, &tb.bricks);
+      const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
+      // Band voxels are first touched at step 0; kNoSite voxels (distance 0, nothing to offer) never push. An exact
+      // band is not listed: its first push is made from the band list itself (stepFromBand).
+      if (offer(s, b, bi, off, packKey(d2, kNoDirection, site), site != kNoSiteKey && !s.seeds.band_exact, tb) &&
+          s.seeds.band_exact)
+        b->exact.set(off);
+    }
+  });
+}
+
+// Every band voxel offers its site, read from the band list (its key cannot have changed), so the band never goes
+// through the front lists. All band voxels push, also those a stencil does not propagate from (fcc12's odd half):
+// exact sites are the best candidates there are.
+void stepFromBand(BandState& s) {
+  const auto& band = s.seeds.band;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+    ThreadBuffers& tb = s.buffers.local();
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (s.stoppingAt(i, 256)) return;
+      const BandVoxel& v = band[i];
+      if (v.site == kNoSite) continue;
+      const Coord bc{v.voxel.x >> kBrickLog2, v.voxel.y >> kBrickLog2, v.voxel.z >> kBrickLog2};
+      const uint32_t bi = s.table.idAt(bc);
+      const BrickState* b = bi == BrickTable::kNoBrick ? nullptr : s.table.get(bi);
+      const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
+      if (!b || keySite(b->key[off].load(std::memory_order_relaxed)) != v.site) continue;  // beyond the limit
+      pushFrom(s, {bi, uint16_t(off), uint8_t(kNoDirection), v.site}, tb);
+    }
+  });
+}
+
+void step(BandState& s, const FrontList& front) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+    ThreadBuffers& tb = s.buffers.local();
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (s.stoppingAt(i, 256)) return;
+      pushFrom(s, front[i], tb);
+    }
+  });
+}
+
+FrontList gatherFront(BandState& s) {
+  FrontList front;
+  if (s.stopping()) return front;  // the run ends: no need to copy the partial buffers
+  size_t n = 0;
+  for (auto& tb : s.buffers) n += tb.next.size();
+  front.reserve(n);
+  for (auto& tb : s.buffers) {
+    if (!s.appendPolled(front, tb.next)) return FrontList();
+    // A large buffer is given back rather than kept for the next step: the initial band's front can be tens of
+    // MB, and later fronts are mostly much smaller (regrowing costs little next to the pushes that fill it).
+    if (tb.next.capacity() > 65536) FrontList().swap(tb.next);
+    tb.next.clear();
+  }
+  // The next front is usually about this one's size: one buffer of that size per thread instead of a chain of
+  // doublings, whose freed links would stay behind as heap holes.
+  const size_t share = n / std::max<size_t>(1, s.buffers.size()) + 4096;
+  for (auto& tb : s.buffers) tb.next.reserve(share);
+  // Snapshot each changed voxel's site as of the end of the step: the next step offers exactly these.
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (s.stoppingAt(i, 4096)) return;
+      BrickState* b = s.table.get(front[i].brick);
+      const uint64_t k = b->key[front[i].offset].load(std::memory_order_relaxed);
+      b->listed.clear(front[i].offset);
+      front[i].site = keySite(k);
+      front[i].dir = uint8_t(keyDir(k));
+    }
+  });
+  return front;
+}
+
+bool collectDeferred(BandState& s) {
+  size_t n = s.deferred.size();
+  for (auto& tb : s.buffers) n += tb.deferred.size();
+  s.deferred.reserve(n);
+  for (auto& tb : s.buffers) {
+    if (!s.appendPolled(s.deferred, tb.deferred)) return false;
+    tb.deferred.clear();
+  }
+  return true;
+}
+
+FrontList takeDeferred(BandState& s) {
+  if (!collectDeferred(s)) return FrontList();
+  // Any order that brings equal entries together serves (the front's order does not change the field).
+  auto order = [](const FrontEntry& a, const FrontEntry& b) {
+    return std::tie(a.brick, a.offset, a.site) < std::tie(b.brick, b.offset, b.site);
+  };
+  auto same = [](const FrontEntry& a, const FrontEntry& b) {
+    return a.brick == b.brick && a.offset == b.offset && a.site == b.site;
+  };
+  if (!runInterruptible(s.opt.interrupter, [&] { tbb::parallel_sort(s.deferred.begin(), s.deferred.end(), order); }))
+    return FrontList();  // stopping() says so from now on
+  s.deferred.erase(std::unique(s.deferred.begin(), s.deferred.end(), same), s.deferred.end());
+  FrontList f;
+  f.swap(s.deferred);
+  return f;
+}
+
+void rearmLifespans(BandState& s) {
+  const size_t n = s.pending_bricks.size();
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (s.stoppingAt(i, 64)) return;
+      BrickState* b = s.table.get(s.pending_bricks[i]);
+      for (int off = 0; off < kBrickVoxels; ++off) {
+        const uint64_t k = b->key[off].load(std::memory_order_relaxed);
+        if (k == kUntouched || b->emitted.test(off)) continue;
+        b->expiry[off].store(s.expiryFor(keyDist2(k)), std::memory_order_relaxed);
+      }
+    }
+  });
+}
+
+}  // namespace distband::engine
