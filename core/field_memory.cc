@@ -1,6 +1,7 @@
 #include "core/field_memory.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include <fmt/format.h>
 
@@ -11,7 +12,12 @@ namespace {
 constexpr double kEngineBytesPerVoxel = 9.0;        // key (8) + 5 bit sets, in whole bricks (exact mode)
 constexpr double kLifespanBytesPerVoxel = 2.0;      // paper mode's expiry steps
 constexpr double kFrontBytesPerVoxel = 3.0;         // front, next front and deferred offers (12 B entries)
-constexpr double kBrickTableBytesPerBrick = 8.0;    // dense brick table over the whole grid
+// The sparse brick table (core/engine/brick_table.h): 24 bytes of top level and directory per super-block of the grid
+// (16^3 bricks), and 32 KiB of slots plus a page per touched super-block. Touched super-blocks are bounded by one per
+// 8 touched bricks (a band is compact: thin shells included), 8 per point seed (a ball at a super-block corner) and 64.
+constexpr double kSuperBlockBricks = 4096;
+constexpr double kTopBytesPerSuperBlock = 24;
+constexpr double kBytesPerTouchedSuperBlock = 36 << 10;
 constexpr double kOutputBytesPerBrick = sizeof(Brick) + 64;
 constexpr double kPointSeedBytes = 24 + 27 * 16;    // the point and its 3^3 block of band voxels
 constexpr double kVolumeSeedBytesPerSeedVoxel = 16;      // unsigned: every seed voxel is a band voxel
@@ -43,8 +49,11 @@ FieldMemoryEstimate estimateFieldMemory(const FieldMemoryInput& in) {
   const double touched = double(std::min(in.touched_voxels, in.grid_voxels));
   const double touched_bricks = touched / kBrickVoxels;
   FieldMemoryEstimate e;
-  double engine = touched * (kEngineBytesPerVoxel + kFrontBytesPerVoxel) +
-                  double(in.grid_voxels) / kBrickVoxels * kBrickTableBytesPerBrick;
+  const double grid_super_blocks = std::ceil(double(in.grid_voxels) / kBrickVoxels / kSuperBlockBricks);
+  const double touched_super_blocks =
+      std::min(grid_super_blocks, touched_bricks / 8 + 8 * double(in.points) + 64);
+  double engine = touched * (kEngineBytesPerVoxel + kFrontBytesPerVoxel) + grid_super_blocks * kTopBytesPerSuperBlock +
+                  touched_super_blocks * kBytesPerTouchedSuperBlock;
   if (in.mode == PropagationMode::kPaper) engine += touched * kLifespanBytesPerVoxel;
   double seeds = 0;
   switch (in.seed_kind) {

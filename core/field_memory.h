@@ -6,9 +6,9 @@
 //   * The constants are measured, not guessed: bench/admission_bench runs each seed kind and mode in its own process
 //     and compares the process's peak RSS growth with this estimate (docs/benchmarks.md has the table); the
 //     estimate must stay above every measurement.
-//   * What is counted: the engine's bricks (per touched voxel, whole bricks), its dense brick table (per grid brick),
-//     front and deferred lists, the seeds (band list, site tables, sign data, Embree's BVH, dense region labels of
-//     signed volumes), and one output chunk of bricks. Not counted: the caller's own buffers (a server adds its
+//   * What is counted: the engine's bricks (per touched voxel, whole bricks), its sparse brick table (per touched
+//     super-block), front and deferred lists, the seeds (band list, site tables, sign data, Embree's BVH, dense region
+//     labels of signed volumes), and one output chunk of bricks. Not counted: the caller's own buffers (a server adds its
 //     stream buffer) and the input asset (already resident).
 // Plain values; thread-safe.
 #pragma once
