@@ -8,24 +8,34 @@
 namespace distband::engine {
 namespace {
 
-// The body of gatherBlock, inlined into checkVoxel, its hot caller (one call per checked voxel), as before the split.
-[[gnu::always_inline]] inline void gatherBlockInline(const BandState& s, const Coord& q, uint64_t* block) {
-  // Per axis: is the coordinate inside the grid, which of the (at most two) bricks holds it, its local index.
-  int bsel[3][5], local[3][5];
-  bool valid[3][5];
-  const int qc[3] = {q.x, q.y, q.z}, dims[3] = {s.dims.x, s.dims.y, s.dims.z};
+/// The 5^3 block centred on q, per axis: whether each coordinate is inside the grid, which of the (at most two)
+/// bricks from b0 holds it (0 or 1), and its local index there.
+struct BlockAxes {
   int b0[3];
-  for (int a = 0; a < 3; ++a) {
-    b0[a] = (qc[a] - 2) >> kBrickLog2;
-    for (int i = 0; i < 5; ++i) {
-      const int c = qc[a] + i - 2;
-      valid[a][i] = c >= 0 && c < dims[a];
-      bsel[a][i] = (c >> kBrickLog2) - b0[a];
-      local[a][i] = c & 7;
+  int sel[3][5], local[3][5];
+  bool valid[3][5];
+  [[gnu::always_inline]] BlockAxes(const BandState& s, const Coord& q) {
+    const int qc[3] = {q.x, q.y, q.z}, dims[3] = {s.dims.x, s.dims.y, s.dims.z};
+    for (int a = 0; a < 3; ++a) {
+      b0[a] = (qc[a] - 2) >> kBrickLog2;
+      for (int i = 0; i < 5; ++i) {
+        const int c = qc[a] + i - 2;
+        valid[a][i] = c >= 0 && c < dims[a];
+        sel[a][i] = (c >> kBrickLog2) - b0[a];
+        local[a][i] = c & 7;
+      }
     }
   }
+};
+
+// The body of gatherBlock, inlined into checkVoxel, its hot caller (one call per checked voxel), as before the split.
+[[gnu::always_inline]] inline void gatherBlockInline(const BandState& s, const Coord& q, uint64_t* block) {
+  const BlockAxes w(s, q);
+  const auto& valid = w.valid;
+  const auto& bsel = w.sel;
+  const auto& local = w.local;
   BrickState* bricks[2][2][2];
-  s.table.bricksFrom({b0[0], b0[1], b0[2]}, &bricks[0][0][0], nullptr);
+  s.table.bricksFrom({w.b0[0], w.b0[1], w.b0[2]}, &bricks[0][0][0], nullptr);
   const uint8_t region = s.regionOf(q);
   int j = 0;
   for (int iz = 0; iz < 5; ++iz)
@@ -181,21 +191,13 @@ FrontList correct(BandState& s, bool first_round) {
           const Coord c = s.table.originOf(dirty[i].brick) + brickLocal(dirty[i].offset);
           // The 5^3 block spans at most two bricks per axis: look the (up to) eight up once (no brick is created or
           // freed during a correction round), and per axis which of them and where in it each coordinate lies.
-          const int qc[3] = {c.x, c.y, c.z}, dims[3] = {s.dims.x, s.dims.y, s.dims.z};
-          int b0[3], sel[3][5], local[3][5];
-          bool valid[3][5];
-          for (int a = 0; a < 3; ++a) {
-            b0[a] = (qc[a] - 2) >> kBrickLog2;
-            for (int j = 0; j < 5; ++j) {
-              const int v = qc[a] + j - 2;
-              valid[a][j] = v >= 0 && v < dims[a];
-              sel[a][j] = (v >> kBrickLog2) - b0[a];
-              local[a][j] = v & 7;
-            }
-          }
+          const BlockAxes w(s, c);
+          const auto& valid = w.valid;
+          const auto& sel = w.sel;
+          const auto& local = w.local;
           uint32_t ids[8];
           BrickState* bricks[8];
-          s.table.bricksFrom({b0[0], b0[1], b0[2]}, bricks, ids);
+          s.table.bricksFrom({w.b0[0], w.b0[1], w.b0[2]}, bricks, ids);
           for (int iz = 0; iz < 5; ++iz) {
             if (!valid[2][iz]) continue;
             for (int iy = 0; iy < 5; ++iy) {
