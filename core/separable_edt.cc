@@ -4,7 +4,9 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <stdexcept>
+#include <utility>
 
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
@@ -20,6 +22,28 @@ namespace distband {
 namespace {
 
 constexpr uint32_t kFar = kFarSquared;  // no seed on this line (yet)
+
+/// Leaves new elements uninitialised: pass 1 writes every one first, so zeroing hundreds of MB on one thread before
+/// it would only add a serial pass (and its page faults) to the parallel ones.
+template <class T>
+struct NoInitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = NoInitAllocator<U>;
+  };
+  NoInitAllocator() = default;
+  template <class U>
+  NoInitAllocator(const NoInitAllocator<U>&) {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+using GridSquares = std::vector<uint32_t, NoInitAllocator<uint32_t>>;  // a squared distance per grid voxel
 
 // Pass 1, along x: each voxel's squared distance to the nearest seed of its row, by two sweeps.
 void rowPass(const uint8_t* mask, bool seeds_nonzero, uint32_t* out, int n) {
@@ -38,10 +62,10 @@ void rowPass(const uint8_t* mask, bool seeds_nonzero, uint32_t* out, int n) {
 // The squared distance of every voxel to the nearest voxel whose mask test equals `seeds_nonzero`; false when
 // interrupted.
 bool squaredDistances(const Coord& dims, const std::vector<uint8_t>& mask, bool seeds_nonzero,
-                      const Interrupter* interrupter, std::vector<uint32_t>* out) {
+                      const Interrupter* interrupter, GridSquares* out) {
   const int nx = dims.x, ny = dims.y, nz = dims.z;
   const size_t slice = size_t(nx) * ny;
-  std::vector<uint32_t>& D = *out;
+  GridSquares& D = *out;
   D.resize(slice * nz);
   // Passes 1 and 2, slice by slice: rows along x, then columns along y inside the (cache-resident) slice.
   tbb::parallel_for(tbb::blocked_range<int>(0, nz), [&](const tbb::blocked_range<int>& r) {
@@ -199,8 +223,8 @@ struct WholeGridSource {
   const Grid& grid;
   const std::vector<uint8_t>& mask;
   bool inside_negative;
-  const std::vector<uint32_t>& outside;
-  const std::vector<uint32_t>& inside;
+  const GridSquares& outside;
+  const GridSquares& inside;
   Coord bd = grid.brickDims();
   size_t count() const { return size_t(bd.x) * bd.y * bd.z; }
   Coord origin(size_t b) const {
@@ -261,7 +285,7 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
     const Coord dims = grid.dims();
     bool ok = false;
     if (std::isinf(options.limit_world)) {
-      std::vector<uint32_t> outside, inside;  // squared distances (voxels) to the mask, and (signed) to its outside
+      GridSquares outside, inside;  // squared distances (voxels) to the mask, and (signed) to its outside
       ok = squaredDistances(dims, mask, true, interrupter, &outside) &&
            (!inside_negative || squaredDistances(dims, mask, false, interrupter, &inside)) &&
            emitSegments(grid, options, WholeGridSource{grid, mask, inside_negative, outside, inside}, &result,
