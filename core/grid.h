@@ -61,6 +61,21 @@ class Grid {
     return {(dims_.x + kBrickSize - 1) >> kBrickLog2, (dims_.y + kBrickSize - 1) >> kBrickLog2,
             (dims_.z + kBrickSize - 1) >> kBrickLog2};
   }
+  int64_t brickCount() const {
+    const Coord b = brickDims();
+    return int64_t(b.x) * b.y * b.z;
+  }
+  /// Linear index of the brick at brick coordinates `b` (x fastest): ascending indices are the (z, y, x) order of the
+  /// bricks' origins.
+  int64_t brickIndex(const Coord& b) const {
+    const Coord d = brickDims();
+    return (int64_t(b.z) * d.y + b.y) * d.x + b.x;
+  }
+  /// Origin (voxel coordinates) of the brick with linear index `i` (brickIndex's inverse, times the brick size).
+  Coord brickOrigin(int64_t i) const {
+    const Coord d = brickDims();
+    return {int(i % d.x) * kBrickSize, int(i / d.x % d.y) * kBrickSize, int(i / (int64_t(d.x) * d.y)) * kBrickSize};
+  }
   /// Linear index of a voxel in a dense x-fastest array ([z][y][x] in C order, as .npy files hold it).
   int64_t denseIndex(const Coord& c) const { return (int64_t(c.z) * dims_.y + c.y) * dims_.x + c.x; }
 

@@ -19,28 +19,16 @@
 namespace distband {
 namespace {
 
-constexpr uint8_t kNoMask = 0, kAllMask = 1, kMixed = 2;
 constexpr int kStride[3] = {64, 8, 1};              // brickOffset's step along x, y, z
 constexpr int kWindowReach = 16;                    // see squaredDistancesWithin
 constexpr uint32_t kWindowFar = uint32_t(1) << 30;  // "far" inside the window minimum: far + reach^2 cannot wrap
 
 bool hasZeroByte(uint64_t w) { return ((w - 0x0101010101010101ull) & ~w & 0x8080808080808080ull) != 0; }
 
-struct BrickDims {
-  Coord bd;
-  uint64_t key(const int c[3]) const {
-    return (uint64_t(c[2]) * uint64_t(bd.y) + uint64_t(c[1])) * uint64_t(bd.x) + uint64_t(c[0]);
-  }
-  void coords(uint64_t key, int c[3]) const {
-    c[0] = int(key % uint64_t(bd.x));
-    c[1] = int(key / uint64_t(bd.x) % uint64_t(bd.y));
-    c[2] = int(key / (uint64_t(bd.x) * uint64_t(bd.y)));
-  }
-  int along(int axis) const { return axis == 0 ? bd.x : axis == 1 ? bd.y : bd.z; }
-};
+int along(const Coord& c, int axis) { return axis == 0 ? c.x : axis == 1 ? c.y : c.z; }
 
-/// Bricks of one pass, in runs of consecutive bricks along the pass's axis. `slot` indexes the pool; `fresh` bricks
-/// start all kFarSquared (allocated by the pass, on the thread that fills them).
+/// Bricks of one pass, in runs of consecutive bricks along the pass's axis. `slot` indexes the pool; a brick whose
+/// slot holds no values yet (the growth added it) starts all kFarSquared.
 struct Runs {
   struct Run {
     int other[2];  // the run's brick coordinates on the two other axes (ascending axis order)
@@ -49,8 +37,7 @@ struct Runs {
   };
   std::vector<Run> runs;
   std::vector<uint32_t> slot;
-  std::vector<uint8_t> fresh;
-  std::vector<uint8_t> seed;  // pass 1: the brick's seeds count (it holds a seed's boundary)
+  std::vector<uint8_t> seed;  // the brick was listed, not added by the growth (pass 1: it holds a seed's boundary)
 };
 
 /// Brick values by slot: null until the brick holds a value (bricks live in a BrickArena).
@@ -109,13 +96,13 @@ struct BrickRef {
   int c[3];
   uint32_t slot;
 };
-Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const BrickDims& dims, Pool& pool, bool all_fresh) {
+Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const Coord& brick_dims, Pool& pool) {
   const int o0 = axis == 0 ? 1 : 0, o1 = axis == 2 ? 1 : 2;  // the other two axes, ascending
   tbb::parallel_sort(bricks.begin(), bricks.end(), [&](const BrickRef& a, const BrickRef& b) {
     return std::tie(a.c[o1], a.c[o0], a.c[axis]) < std::tie(b.c[o1], b.c[o0], b.c[axis]);
   });
   Runs r;
-  const int n_axis = dims.along(axis);
+  const int n_axis = along(brick_dims, axis);
   for (size_t i = 0; i < bricks.size();) {
     size_t j = i;
     while (j < bricks.size() && bricks[j].c[o0] == bricks[i].c[o0] && bricks[j].c[o1] == bricks[i].c[o1]) ++j;
@@ -133,13 +120,11 @@ Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const BrickDi
         uint32_t s = existing ? bricks[e].slot : kNoSlot;
         r.seed.push_back(existing);
         if (existing) ++e;
-        const bool fresh = all_fresh || s == kNoSlot;
         if (s == kNoSlot) {
           s = uint32_t(pool.size());
           pool.push_back(nullptr);
         }
         r.slot.push_back(s);
-        r.fresh.push_back(fresh);
       }
       r.runs.push_back(run);
       k = m;
@@ -201,12 +186,12 @@ bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, 
       const size_t count = size_t(run.hi - run.lo + 1);
       bricks.resize(count);
       if (fresh.size() < count * kBrickVoxels) fresh.resize(count * kBrickVoxels);
+      // Each slot belongs to one run: a null one is a fresh brick (no other run can have filled it meanwhile).
       for (size_t i = 0; i < count; ++i) {
-        if (r.fresh[run.first + i]) {
+        bricks[i] = pool[r.slot[run.first + i]];
+        if (!bricks[i]) {
           bricks[i] = fresh.data() + i * kBrickVoxels;
           std::fill(bricks[i], bricks[i] + kBrickVoxels, kFarSquared);
-        } else {
-          bricks[i] = pool[r.slot[run.first + i]];
         }
       }
       const int length = std::min(int(count) * kBrickSize, n[axis] - run.lo * kBrickSize);
@@ -214,12 +199,11 @@ bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, 
       const int w_end = std::min(kBrickSize, n[o1] - run.other[1] * kBrickSize);
       for (int u = 0; u < u_end; ++u) lines(ri, u, u * kStride[o0], w_end, length, bricks.data(), scratch);
       for (size_t i = 0; i < count; ++i) {
+        uint32_t*& slot = pool[r.slot[run.first + i]];
         const uint32_t* v = bricks[i];
-        if (!r.fresh[run.first + i] || std::all_of(v, v + kBrickVoxels, [](uint32_t x) { return x == kFarSquared; }))
-          continue;
-        uint32_t* kept = arena.allocate();
-        std::copy(v, v + kBrickVoxels, kept);
-        pool[r.slot[run.first + i]] = kept;
+        if (slot || std::all_of(v, v + kBrickVoxels, [](uint32_t x) { return x == kFarSquared; })) continue;
+        slot = arena.allocate();
+        std::copy(v, v + kBrickVoxels, slot);
       }
     }
   });
@@ -233,11 +217,10 @@ const uint32_t* SquaredBricks::find(uint64_t key) const {
   return it != keys.end() && *it == key ? values[size_t(it - keys.begin())] : nullptr;
 }
 
-std::vector<uint8_t> classifyMaskBricks(const Coord& dims, const std::vector<uint8_t>& mask,
+std::vector<uint8_t> classifyMaskBricks(const Grid& grid, const std::vector<uint8_t>& mask,
                                         const Interrupter* interrupter) {
-  const Coord bd{(dims.x + kBrickSize - 1) / kBrickSize, (dims.y + kBrickSize - 1) / kBrickSize,
-                 (dims.z + kBrickSize - 1) / kBrickSize};
-  std::vector<uint8_t> kinds(size_t(bd.x) * bd.y * bd.z);
+  const Coord dims = grid.dims(), bd = grid.brickDims();
+  std::vector<uint8_t> kinds(size_t(grid.brickCount()));
   // One line of bricks (by, bz) at a time: its 64 voxel rows are read front to back, a word per brick.
   tbb::parallel_for(tbb::blocked_range<size_t>(0, size_t(bd.y) * bd.z, 4), [&](const tbb::blocked_range<size_t>& r) {
     std::vector<uint8_t> any(size_t(bd.x)), all(size_t(bd.x));
@@ -262,34 +245,33 @@ std::vector<uint8_t> classifyMaskBricks(const Coord& dims, const std::vector<uin
           }
         }
       uint8_t* out = kinds.data() + line * size_t(bd.x);
-      for (size_t bx = 0; bx < size_t(bd.x); ++bx) out[bx] = !any[bx] ? kNoMask : all[bx] ? kAllMask : kMixed;
+      for (size_t bx = 0; bx < size_t(bd.x); ++bx)
+        out[bx] = !any[bx] ? kNoMaskVoxel : all[bx] ? kAllMaskVoxels : kSomeMaskVoxels;
     }
   });
   return kinds;
 }
 
-bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask, const std::vector<uint8_t>& kinds,
+bool squaredDistancesWithin(const Grid& grid, const std::vector<uint8_t>& mask, const std::vector<uint8_t>& kinds,
                             bool seeds_nonzero, uint32_t cut2, const Interrupter* interrupter, SquaredBricks* out) {
-  const BrickDims bdims{{(dims.x + kBrickSize - 1) / kBrickSize, (dims.y + kBrickSize - 1) / kBrickSize,
-                         (dims.z + kBrickSize - 1) / kBrickSize}};
-  const Coord bd = bdims.bd;
-  const uint8_t all_seeds = seeds_nonzero ? kAllMask : kNoMask, no_seeds = seeds_nonzero ? kNoMask : kAllMask;
+  const Coord dims = grid.dims(), bd = grid.brickDims();
+  const uint8_t all_seeds = seeds_nonzero ? kAllMaskVoxels : kNoMaskVoxel;
+  const uint8_t no_seeds = seeds_nonzero ? kNoMaskVoxel : kAllMaskVoxels;
   // The bricks holding a seed's boundary: mixed ones, and all-seed ones beside a brick that is not all seeds.
   std::vector<std::vector<BrickRef>> per_slab(size_t(bd.z));
   tbb::parallel_for(0, bd.z, [&](int bz) {
     if (isInterrupted(interrupter)) return;
     for (int by = 0; by < bd.y; ++by)
       for (int bx = 0; bx < bd.x; ++bx) {
-        const int c[3] = {bx, by, bz};
-        const uint8_t kind = kinds[bdims.key(c)];
-        bool boundary = kind == kMixed;
+        const uint8_t kind = kinds[size_t(grid.brickIndex({bx, by, bz}))];
+        bool boundary = kind == kSomeMaskVoxels;
         if (kind == all_seeds)
           for (int a = 0; a < 3 && !boundary; ++a)
             for (int s : {-1, 1}) {
               int nc[3] = {bx, by, bz};
               nc[a] += s;
-              if (nc[a] < 0 || nc[a] >= bdims.along(a)) continue;
-              if (kinds[bdims.key(nc)] != all_seeds) boundary = true;
+              if (nc[a] < 0 || nc[a] >= along(bd, a)) continue;
+              if (kinds[size_t(grid.brickIndex({nc[0], nc[1], nc[2]}))] != all_seeds) boundary = true;
             }
         if (boundary && kind != no_seeds) per_slab[size_t(bz)].push_back({{bx, by, bz}, kNoSlot});
       }
@@ -308,7 +290,7 @@ bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask,
   Pool pool;
   BrickArena arena;
   // Pass 1, along x: each voxel's squared distance to the nearest seed of its row (within the boundary bricks).
-  Runs runs = buildRuns(bricks, 0, reach_bricks, bdims, pool, true);
+  Runs runs = buildRuns(bricks, 0, reach_bricks, bd, pool);
   const bool ok1 = forEachLines(
       runs, 0, dims, reach_voxels, pool, arena, interrupter,
       [&](size_t ri, int u, int base, int w_end, int length, uint32_t* const* values, LineScratch&) {
@@ -339,7 +321,7 @@ bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask,
   // Passes 2 and 3, along y and z: the lower envelope of the previous pass's parabolas on each line.
   for (int axis : {1, 2}) {
     bricks = liveBricks(runs, axis == 1 ? 0 : 1, pool);
-    runs = buildRuns(bricks, axis, reach_bricks, bdims, pool, false);
+    runs = buildRuns(bricks, axis, reach_bricks, bd, pool);
     const int o1 = axis == 2 ? 1 : 2;  // the second other axis: the lanes of a bundle
     const bool ok =
         forEachLines(runs, axis, dims, reach_voxels, pool, arena, interrupter,
@@ -348,8 +330,7 @@ bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask,
                          return values[i / kBrickSize][base + w * kStride[o1] + (i % kBrickSize) * kStride[axis]];
                        };
                        if (window) {
-                         // Eight lines at once: their values side by side, padded by the
-                         // reach's far rows at both ends.
+                         // Eight lines at once, side by side, padded by reach_voxels far rows at each end.
                          auto* lane = s.lanes.data() + reach_voxels;
                          bool any = false;
                          for (int i = -reach_voxels; i < length + reach_voxels; ++i) lane[i].fill(kWindowFar);
@@ -387,7 +368,10 @@ bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask,
   }
   bricks = liveBricks(runs, 2, pool);
   std::vector<std::pair<uint64_t, uint32_t>> order(bricks.size());
-  for (size_t i = 0; i < bricks.size(); ++i) order[i] = {bdims.key(bricks[i].c), bricks[i].slot};
+  for (size_t i = 0; i < bricks.size(); ++i) {
+    const int* c = bricks[i].c;
+    order[i] = {uint64_t(grid.brickIndex({c[0], c[1], c[2]})), bricks[i].slot};
+  }
   tbb::parallel_sort(order.begin(), order.end());
   out->keys.resize(order.size());
   out->values.resize(order.size());

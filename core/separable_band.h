@@ -29,7 +29,7 @@
 
 namespace distband {
 
-/// Bricks with their squared distances: keys ascending (linear brick index, i.e. (z, y, x) order of the origins),
+/// Bricks with their squared distances: keys ascending (Grid::brickIndex, i.e. (z, y, x) order of the origins),
 /// values[i] holds kBrickVoxels entries in brickOffset order.
 struct SquaredBricks {
   std::vector<uint64_t> keys;
@@ -39,12 +39,15 @@ struct SquaredBricks {
   const uint32_t* find(uint64_t key) const;
 };
 
-/// Per brick of the grid (linear brick index): 0 no mask voxel, 1 every voxel (inside the grid) a mask voxel, 2 both.
-std::vector<uint8_t> classifyMaskBricks(const Coord& dims, const std::vector<uint8_t>& mask,
+/// What a brick of the grid holds of the mask (of its voxels inside the grid).
+enum MaskBrick : uint8_t { kNoMaskVoxel = 0, kAllMaskVoxels = 1, kSomeMaskVoxels = 2 };
+
+/// One MaskBrick per brick of the grid, by Grid::brickIndex.
+std::vector<uint8_t> classifyMaskBricks(const Grid& grid, const std::vector<uint8_t>& mask,
                                         const Interrupter* interrupter);
 
 /// See above. `brick_kinds` from classifyMaskBricks; `cut2` >= 0. False when interrupted.
-bool squaredDistancesWithin(const Coord& dims, const std::vector<uint8_t>& mask,
+bool squaredDistancesWithin(const Grid& grid, const std::vector<uint8_t>& mask,
                             const std::vector<uint8_t>& brick_kinds, bool seeds_nonzero, uint32_t cut2,
                             const Interrupter* interrupter, SquaredBricks* out);
 

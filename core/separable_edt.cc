@@ -225,11 +225,8 @@ struct WholeGridSource {
   bool inside_negative;
   const GridSquares& outside;
   const GridSquares& inside;
-  Coord bd = grid.brickDims();
-  size_t count() const { return size_t(bd.x) * bd.y * bd.z; }
-  Coord origin(size_t b) const {
-    return {int(b % bd.x) * kBrickSize, int(b / bd.x % bd.y) * kBrickSize, int(b / (size_t(bd.x) * bd.y)) * kBrickSize};
-  }
+  size_t count() const { return size_t(grid.brickCount()); }
+  Coord origin(size_t b) const { return grid.brickOrigin(int64_t(b)); }
   bool value(size_t, int, const Coord& c, double* d) const {
     if (!grid.contains(c)) return false;
     const size_t v = size_t(grid.denseIndex(c));
@@ -246,15 +243,10 @@ struct BandSource {
   const std::vector<uint8_t>& mask;
   bool inside_negative;
   uint32_t cut2;
-  std::vector<uint64_t> keys;                       // the union of the listed bricks, ascending
-  std::vector<const uint32_t*> outside, inside;     // their squared distances, or null
-  Coord bd = grid.brickDims();
+  std::vector<uint64_t> keys;                    // the union of the listed bricks (Grid::brickIndex), ascending
+  std::vector<const uint32_t*> outside, inside;  // their squared distances, or null
   size_t count() const { return keys.size(); }
-  Coord origin(size_t i) const {
-    const uint64_t b = keys[i];
-    return {int(b % uint64_t(bd.x)) * kBrickSize, int(b / uint64_t(bd.x) % uint64_t(bd.y)) * kBrickSize,
-            int(b / (uint64_t(bd.x) * uint64_t(bd.y))) * kBrickSize};
-  }
+  Coord origin(size_t i) const { return grid.brickOrigin(int64_t(keys[i])); }
   bool value(size_t i, int off, const Coord& c, double* d) const {
     if (!grid.contains(c)) return false;
     if (mask[size_t(grid.denseIndex(c))]) {
@@ -294,11 +286,11 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
       // Delivered: squared distance <= limit^2 (voxels), an integer bound on the integer squared distances.
       const double limit = options.limit_world / grid.voxelSize();
       const uint32_t cut2 = uint32_t(std::min(std::floor(limit * limit), double(uint32_t(1) << 31)));
-      const std::vector<uint8_t> kinds = classifyMaskBricks(dims, mask, interrupter);
+      const std::vector<uint8_t> kinds = classifyMaskBricks(grid, mask, interrupter);
       SquaredBricks outside, inside;
       ok = !isInterrupted(interrupter) &&
-           squaredDistancesWithin(dims, mask, kinds, true, cut2, interrupter, &outside) &&
-           (!inside_negative || squaredDistancesWithin(dims, mask, kinds, false, cut2, interrupter, &inside));
+           squaredDistancesWithin(grid, mask, kinds, true, cut2, interrupter, &outside) &&
+           (!inside_negative || squaredDistancesWithin(grid, mask, kinds, false, cut2, interrupter, &inside));
       if (ok) {
         BandSource source{grid, mask, inside_negative, cut2, {}, {}, {}};
         // Unsigned, every mask voxel is delivered (distance 0): the bricks holding one join the outside's.
@@ -306,7 +298,7 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
         keys.insert(keys.end(), inside.keys.begin(), inside.keys.end());
         if (!inside_negative)
           for (size_t b = 0; b < kinds.size(); ++b)
-            if (kinds[b] != 0) keys.push_back(b);
+            if (kinds[b] != kNoMaskVoxel) keys.push_back(b);
         tbb::parallel_sort(keys.begin(), keys.end());
         keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
         source.outside.reserve(keys.size());

@@ -330,7 +330,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
   }
   const double radius = std::min(options.band_radius_voxels, options.limit_voxels);
   const double r2 = radius * radius;
-  const Coord dims = grid.dims(), bd = grid.brickDims();
+  const Coord dims = grid.dims();
 
   // Voxel box of each triangle's radius-neighbourhood, clipped to the grid (lo > hi: nothing to scan).
   auto voxelBox = [&](size_t t, Coord* lo, Coord* hi) {
@@ -363,7 +363,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
     for (int z = lo.z >> 3; z <= hi.z >> 3; ++z)
       for (int y = lo.y >> 3; y <= hi.y >> 3; ++y)
         for (int x = lo.x >> 3; x <= hi.x >> 3; ++x)
-          cand[o++] = {(int64_t(z) * bd.y + y) * bd.x + x, uint32_t(t)};
+          cand[o++] = {grid.brickIndex({x, y, z}), uint32_t(t)};
   });
   tbb::parallel_sort(cand.begin(), cand.end(), [](const Candidate& a, const Candidate& b) {
     return a.brick < b.brick || (a.brick == b.brick && a.tri < b.tri);
@@ -380,8 +380,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
   tbb::parallel_for(size_t(0), nbricks, [&](size_t b) {
     if (tbb::is_current_task_group_canceling()) return;
     const int64_t key = cand[starts[b]].brick;
-    const Coord borg{int32_t(key % bd.x) * kBrickSize, int32_t((key / bd.x) % bd.y) * kBrickSize,
-                     int32_t(key / (int64_t(bd.x) * bd.y)) * kBrickSize};
+    const Coord borg = grid.brickOrigin(key);
     std::array<double, kBrickVoxels> best;
     std::array<uint32_t, kBrickVoxels> best_t;
     best.fill(r2);
