@@ -96,7 +96,9 @@ TEST(SeparableEdtTest, MatchesTheExactEdtUnsignedAndSignedWithSegmentsAndChunks)
       EXPECT_EQ(missing, 0) << "every voxel exactly once";
       EXPECT_EQ(wrong, 0) << inside_negative << " " << segment;
       EXPECT_EQ(c.result.voxels, grid.voxelCount());
-      if (segment > 0) EXPECT_GT(c.result.segments.size(), 3u);
+      if (segment > 0) {
+        EXPECT_GT(c.result.segments.size(), 3u);
+      }
     }
 }
 
