@@ -1,12 +1,13 @@
 // edt_peer_bench: the engine against seung-lab edt (`binary_edt`, separable and threaded: the fastest public CPU
 // exact EDT) on the same seeds, in the same run — the table of issue 11.
-//   * Cases: two seed voxels at 256³ and a sphere shell at 256³ and 512³ (full domain), a sphere shell and 40 random
-//     blobs at 512³ with a limit of 5 voxels. edt has no limit: it always computes the whole grid, which is what a
+//   * Cases: two points at 256³ and 512³, two seed voxels at 256³ and a sphere shell at 256³ and 512³ (full
+//     domain), a sphere shell and 40 random blobs at 512³ with a limit of 5 voxels. edt has no limit: it always computes the whole grid, which is what a
 //     limited query has to beat.
 //   * distband is timed engine only (seeds built before the clock starts, output bricks dropped), edt whole (it has
 //     no separate setup); each at the thread counts asked, medians of --reps runs, the peer in the same process.
-//   * Full-domain rows run twice: with the algorithm the product picks for them (core's planner: the separable
-//     EDT, core/separable_edt.h) and with the active band forced (what every volume query used before).
+//   * Rows run with the algorithm the product picks (core's planner: the separable EDTs, core/separable_edt.h for
+//     volumes and core/separable_points.h for the two points) and, unless --compare-band false, again with the active
+//     band forced (what every volume and point query used before).
 //   * Accuracy: distband against edt's exact result on every delivered voxel (max error in voxels, % exact).
 // The peer's header is read from ../shared/peers/edt (LGPL-3.0): it is built into this program, never copied into
 // the repository. Writes a Markdown table to stdout and, with --json, the rows to a file.
@@ -26,7 +27,7 @@
 #include "bench/bench_util.h"
 #include "core/engine.h"
 #include "core/field_plan.h"
-#include "core/separable_edt.h"
+#include "core/planned_field.h"
 #include "core/seeds/point_seeds.h"
 #include "core/seeds/volume_seeds.h"
 
@@ -41,7 +42,15 @@ struct Case {
   int n;
   double limit_voxels;  // infinity: full domain
   std::vector<uint8_t> (*mask)(int n);
-  bool as_points = false;  // seed the engine with the mask's voxels as a point list (PointList seeds: the band)
+  bool as_points = false;  // seed the engine with the mask's voxels as a point list (point seeds)
+  /// The mask's voxels as points (index space = world space here: origin 0, voxel size 1).
+  std::vector<Vec3d> points(int size) const {
+    const std::vector<uint8_t> m = mask(size);
+    std::vector<Vec3d> p;
+    for (size_t i = 0; i < m.size(); ++i)
+      if (m[i]) p.push_back({double(i % size), double(i / size % size), double(i / (size_t(size) * size))});
+    return p;
+  }
 };
 
 std::vector<uint8_t> twoVoxels(int n) {
@@ -100,13 +109,13 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool pee
   for (int r = 0; r < reps; ++r) {
     Seeds seeds;
     if (c.as_points) {
-      std::vector<Vec3d> points;
-      for (size_t i = 0; i < mask.size(); ++i)
-        if (mask[i]) points.push_back({double(i % n), double(i / n % n), double(i / (size_t(n) * n))});
-      if (std::string e = makePointSeeds(grid, points, &seeds); !e.empty()) throw std::runtime_error(e);
+      if (std::string e = makePointSeeds(grid, c.points(n), &seeds); !e.empty()) throw std::runtime_error(e);
     } else if (algorithm == FieldAlgorithm::kBand) {
       if (std::string e = makeVolumeSeeds(grid, mask, false, &seeds); !e.empty()) throw std::runtime_error(e);
     }
+    FieldPlan plan;  // the exact mode's plan with the algorithm under test
+    plan.seeds = c.as_points ? SeedKind::kPoints : SeedKind::kVolume;
+    plan.algorithm = algorithm;
     EngineOptions o;
     o.threads = threads;
     o.limit_world = c.limit_voxels;
@@ -131,9 +140,7 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool pee
         }
       check_s += std::chrono::duration<double>(Clock::now() - c0).count();
     };
-    const EngineResult result = algorithm == FieldAlgorithm::kSeparable
-                                    ? computeSeparableVolumeField(grid, mask, false, o, consume)
-                                    : computeDistanceField(grid, seeds, o, consume);
+    const EngineResult result = computePlannedField(plan, grid, std::move(seeds), &mask, o, consume);
     times.push_back(std::chrono::duration<double>(Clock::now() - t0).count() - check_s);
     cpu.push_back(processCpuSeconds() - cpu0 - check_s);
     row.voxels = result.voxels;
@@ -170,6 +177,7 @@ int main(int argc, char** argv) {
   const double inf = std::numeric_limits<double>::infinity();
   const std::vector<Case> cases = {
       {"two points (point seeds), full domain", 256, inf, twoVoxels, true},
+      {"two points (point seeds), full domain", 512, inf, twoVoxels, true},
       {"two seed voxels, full domain", 256, inf, twoVoxels},
       {"sphere shell, full domain", 256, inf, bench::sphereShellMask},
       {"sphere shell, full domain", 512, inf, bench::sphereShellMask},
@@ -185,6 +193,7 @@ int main(int argc, char** argv) {
     FieldRequest request;
     request.seeds = c.as_points ? SeedKind::kPoints : SeedKind::kVolume;
     request.limit_world = c.limit_voxels;
+    if (c.as_points) request.point_layout = pointLayout(c.points(c.n));
     FieldPlan plan;
     planField(request, Grid({0, 0, 0}, 1.0, {c.n, c.n, c.n}), nullptr, &plan);
     std::vector<FieldAlgorithm> algorithms{plan.algorithm};

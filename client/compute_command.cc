@@ -12,7 +12,7 @@
 #include "client/brick_sink.h"
 #include "core/engine.h"
 #include "core/field_plan.h"
-#include "core/separable_edt.h"
+#include "core/planned_field.h"
 #include "core/io/field_metadata.h"
 #include "core/io/npy.h"
 #include "core/mesh/mesh_grid.h"
@@ -138,7 +138,9 @@ std::string buildSeedInput(const ComputeArgs& a, const FieldRequest& field, cons
   if (std::string e = parsePointList(a.points, &points); !e.empty()) return e;
   in->grid = Grid(origin, voxel_size, dims);
   if (std::string e = in->grid.validate(); !e.empty()) return e;
-  if (std::string e = planField(field, in->grid, nullptr, &in->plan); !e.empty()) return e;
+  FieldRequest point_field = field;
+  point_field.point_layout = pointLayout(points);  // the planner's cost model
+  if (std::string e = planField(point_field, in->grid, nullptr, &in->plan); !e.empty()) return e;
   if (std::string e = makePointSeeds(in->grid, points, &in->seeds); !e.empty()) return "--points: " + e;
   in->description = fmt::format("{} point{} in {}x{}x{}", points.size(), points.size() == 1 ? "" : "s", dims.x,
                                 dims.y, dims.z);
@@ -309,9 +311,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
       if (complete) outputs.commitSegment(upper);
       committed_voxels += voxels;
     };
-    result = in.plan.algorithm == FieldAlgorithm::kSeparable
-                 ? computeSeparableVolumeField(in.grid, *in.mask, in.plan.inside_negative, options, consume)
-                 : computeDistanceField(in.grid, std::move(in.seeds), options, consume);
+    result = computePlannedField(in.plan, in.grid, std::move(in.seeds), in.mask.get(), options, consume);
   } catch (const std::invalid_argument& e) {
     return usage(e.what());
   } catch (const std::exception& e) {

@@ -72,7 +72,7 @@ FieldMemoryEstimate estimateFieldMemory(const FieldMemoryInput& in) {
       break;
     }
   }
-  if (in.separable) {  // no seeds and no band state
+  if (in.separable) {  // no band state, and no seeds but a point list
     const double sides = in.signed_volume ? 2 : 1;  // signed: the outside's and the inside's squared distances
     if (in.limited)
       // Within a limit: 4 bytes per voxel of the bricks that hold a value (inside the touched bound: the boundary's
@@ -80,9 +80,14 @@ FieldMemoryEstimate estimateFieldMemory(const FieldMemoryInput& in) {
       // and a byte per grid brick for the mask's classification.
       engine = touched * kSeparableBandBytesPerVoxel * sides + touched_bricks * kSeparableBytesPerBandBrick +
                double(in.grid_voxels) / kBrickVoxels;
+    else if (in.seed_kind == FieldMemoryInput::SeedKind::kPoints)
+      // Points: a nearest-point index per grid voxel, pass 2's squared distance and point per plane entry, segment
+      // lists per brick; the sorted points.
+      engine = double(in.grid_voxels) * 4 + double(in.separable_plane_voxels) * 12 +
+               double(in.grid_voxels) / kBrickVoxels * 24 + double(in.points) * 16;
     else  // whole grid: squared distances per grid voxel, segment lists per brick
       engine = double(in.grid_voxels) * 4 * sides + double(in.grid_voxels) / kBrickVoxels * 24;
-    seeds = 0;
+    if (in.seed_kind != FieldMemoryInput::SeedKind::kPoints) seeds = 0;
   }
   const double chunk_bricks = in.chunk_bricks ? std::min(double(in.chunk_bricks), touched_bricks) : touched_bricks;
   e.engine_bytes = uint64_t(engine * kSafety) + kFixedBytes;

@@ -38,10 +38,12 @@ struct FieldMemoryInput {
   /// the estimate bounds by the touched voxels.
   uint64_t chunk_bricks = 0;
   bool closest_features = false;  ///< EngineOptions::closest_features: 4 KiB more per output brick
-  /// FieldAlgorithm::kSeparable: no band state; 4 bytes (8 signed) per grid voxel, or with a limit up to 8 (16) per
-  /// touched voxel.
+  /// FieldAlgorithm::kSeparable: no band state. Volumes: 4 bytes (8 signed) per grid voxel, or with a limit up to 8
+  /// (16) per touched voxel. Points: 4 bytes per grid voxel and 12 per separable_plane_voxels.
   bool separable = false;
   bool limited = false;  ///< the query has a finite limit
+  /// Separable point seeds (core/separable_points.h): planes x X x Y of the grid, the entries of its per-plane pass.
+  uint64_t separable_plane_voxels = 0;
 };
 
 struct FieldMemoryEstimate {

@@ -71,11 +71,16 @@ std::string planField(const FieldRequest& r, const Grid& grid, const MeshReport*
   p.segment_length_world = r.segment_length_world;
   p.closest_features = r.closest_features;
   p.second_ring = r.second_ring;
+  p.point_layout = r.point_layout;
   // A volume's exact field is what a separable EDT computes fastest, over the whole grid or, with a limit, over the
-  // bricks within it (docs/benchmarks.md, edt_peer_bench); a stencil or paper mode asks for the propagation itself,
-  // and closest features come from the propagation's sites.
-  if (r.seeds == SeedKind::kVolume && p.mode == PropagationMode::kExact && !r.stencil && !r.closest_features &&
-      !r.second_ring)
+  // bricks within it (docs/benchmarks.md, edt_peer_bench); a stencil, a second ring or paper mode asks for the
+  // propagation itself, and a volume's closest features come from the propagation's sites. Point seeds on few lattice
+  // planes take the separable point EDT over the whole grid; with a limit the band's work follows the limit instead.
+  const bool propagation_asked = p.mode != PropagationMode::kExact || r.stencil || r.second_ring;
+  if (r.seeds == SeedKind::kVolume && !propagation_asked && !r.closest_features)
+    p.algorithm = FieldAlgorithm::kSeparable;
+  if (r.seeds == SeedKind::kPoints && !propagation_asked && std::isinf(p.limit_world) && r.point_layout &&
+      separablePointsPay(grid.dims(), *r.point_layout))
     p.algorithm = FieldAlgorithm::kSeparable;
   *out = std::move(p);
   return {};

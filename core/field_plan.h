@@ -1,8 +1,9 @@
 // FieldPlan: the one place the defaults of a distance-field request are decided, for every caller — the server's
 // request validation, `distband compute` and the benches — so a default changes in one line.
 // Contract: planField() turns a FieldRequest (any choice may be left unset) into a FieldPlan where every choice is
-// made: the algorithm (the separable EDT for a seed volume without a limit, in exact mode, with no stencil asked
-// for and no closest features; the band otherwise), propagation mode (exact), site kind (triangles for meshes in exact mode, points otherwise), stencil
+// made: the algorithm (in exact mode with no stencil or second ring asked for: the separable EDT for a seed volume
+// without closest features, and for point seeds without a limit that lie on few lattice planes (separablePointsPay);
+// the band otherwise), propagation mode (exact), site kind (triangles for meshes in exact mode, points otherwise), stencil
 // (defaultStencil of the site kind), sign (meshes: kDefaultMeshSign, auto, resolved on the mesh's edges with the
 // reason; points unsigned; volumes unsigned unless inside_negative), and the limit in world units. The grid comes
 // first (core/mesh/mesh_grid.h decides its padding from the same limit): a limit given in voxels needs its voxel
@@ -19,15 +20,16 @@
 #include "core/grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
+#include "core/separable_points.h"
 #include "core/stencil.h"
 
 namespace distband {
 
 enum class SeedKind { kPoints, kVolume, kMesh };
 
-/// How the field is computed: the active band's propagation (any seeds), or, for a seed volume in exact mode, the
-/// separable exact EDT (core/separable_edt.h: over the whole grid, or over the bricks within the limit), several
-/// times faster there and exact.
+/// How the field is computed: the active band's propagation (any seeds), or, in exact mode, a separable exact EDT —
+/// for a seed volume (core/separable_edt.h: over the whole grid, or over the bricks within the limit) and for point
+/// seeds on few planes without a limit (core/separable_points.h) — several times faster there and exact.
 enum class FieldAlgorithm { kBand, kSeparable };
 std::string_view algorithmName(FieldAlgorithm algorithm);  ///< "band", "separable"
 
@@ -43,6 +45,8 @@ struct FieldRequest {
   double segment_length_world = 0;  ///< 0: one segment
   bool closest_features = false;
   std::optional<bool> second_ring;  ///< unset: the engine's default for the site kind
+  /// Point seeds: how they lie on the lattice (pointLayout of their world or index coordinates). Unset: the band.
+  std::optional<PointLayout> point_layout;
 };
 
 struct FieldPlan {
@@ -58,6 +62,7 @@ struct FieldPlan {
   double segment_length_world = 0;
   bool closest_features = false;
   std::optional<bool> second_ring;
+  std::optional<PointLayout> point_layout;  ///< the request's (point seeds)
 
   bool signedField() const {
     return seeds == SeedKind::kMesh ? mesh_sign != SignMethod::kUnsigned : seeds == SeedKind::kVolume && inside_negative;

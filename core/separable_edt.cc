@@ -13,6 +13,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
+#include "core/segment_emission.h"
 #include "core/separable_band.h"
 #include "core/separable_lines.h"
 #include "core/seeds/volume_seeds.h"
@@ -23,26 +24,6 @@ namespace {
 
 constexpr uint32_t kFar = kFarSquared;  // no seed on this line (yet)
 
-/// Leaves new elements uninitialised: pass 1 writes every one first, so zeroing hundreds of MB on one thread before
-/// it would only add a serial pass (and its page faults) to the parallel ones.
-template <class T>
-struct NoInitAllocator : std::allocator<T> {
-  template <class U>
-  struct rebind {
-    using other = NoInitAllocator<U>;
-  };
-  NoInitAllocator() = default;
-  template <class U>
-  NoInitAllocator(const NoInitAllocator<U>&) {}
-  template <class U>
-  void construct(U* p) noexcept {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <class U, class... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
-};
 using GridSquares = std::vector<uint32_t, NoInitAllocator<uint32_t>>;  // a squared distance per grid voxel
 
 // Pass 1, along x: each voxel's squared distance to the nearest seed of its row, by two sweeps.
@@ -113,109 +94,6 @@ bool squaredDistances(const Coord& dims, const std::vector<uint8_t>& mask, bool 
     }
   });
   return !isInterrupted(interrupter);
-}
-
-/// Streams a field given brick by brick, under the engine's contract (segments nearest first, bricks in (z, y, x)
-/// order, chunks). `Source` lists bricks in that order: count(), origin(i), and value(i, offset, voxel, &d), true
-/// when the voxel is delivered with signed distance d (voxels). False when interrupted.
-template <typename Source>
-bool emitSegments(const Grid& grid, const EngineOptions& options, const Source& source, EngineResult* result,
-                  const SegmentCallback& on_segment) {
-  using Clock = std::chrono::steady_clock;
-  const Interrupter* interrupter = options.interrupter;
-  const double h = grid.voxelSize();
-  // |distance| in voxels, and its segment: (i L, (i + 1) L], segment 0 including 0 (one segment when L = 0).
-  const double length = options.segment_length_world > 0 ? options.segment_length_world / h : 0;
-  auto segmentOf = [&](double d) { return length > 0 && d > length ? int(std::ceil(d / length)) - 1 : 0; };
-  constexpr int kNone = std::numeric_limits<int>::max();
-  // Each brick's segment range (kNone: nothing delivered), then the bricks of every segment in (z, y, x) order.
-  const size_t bricks = source.count();
-  std::vector<int> first(bricks), last(bricks);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, bricks, 64), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t b = r.begin(); b != r.end(); ++b) {
-      if ((b & 63) == 0 && isInterrupted(interrupter)) return;
-      const Coord origin = source.origin(b);
-      int lo = kNone, hi = -1;
-      for (int off = 0; off < kBrickVoxels; ++off) {
-        double d;
-        if (!source.value(b, off, origin + brickLocal(off), &d)) continue;
-        const int s = segmentOf(std::abs(d));
-        lo = std::min(lo, s);
-        hi = std::max(hi, s);
-        if (length == 0) break;  // one segment: a voxel is enough
-      }
-      first[b] = lo;
-      last[b] = hi;
-    }
-  });
-  if (isInterrupted(interrupter)) return false;
-  int segments = 1;
-  for (int hi : last) segments = std::max(segments, hi + 1);
-  std::vector<std::vector<uint32_t>> by_segment(static_cast<size_t>(segments));
-  for (size_t b = 0; b < bricks; ++b)
-    for (int s = first[b]; s <= last[b]; ++s) by_segment[size_t(s)].push_back(uint32_t(b));
-  std::vector<int>().swap(first);
-  std::vector<int>().swap(last);
-
-  const size_t per_chunk = options.max_chunk_bricks ? options.max_chunk_bricks : std::numeric_limits<size_t>::max();
-  for (int s = 0; s < segments; ++s) {
-    const auto ts = Clock::now();
-    SegmentStats stats;
-    stats.index = s;
-    stats.lower_world = length > 0 ? s * length * h : 0;
-    stats.upper_world = std::min(length > 0 ? (s + 1) * length * h : std::numeric_limits<double>::infinity(),
-                                 options.limit_world);
-    const std::vector<uint32_t>& list = by_segment[size_t(s)];
-    SegmentBricks whole;
-    for (size_t c0 = 0; c0 < list.size() || c0 == 0;) {
-      if (isInterrupted(interrupter)) return false;
-      const size_t c1 = std::min(list.size(), c0 + std::min<size_t>(per_chunk, 8192));
-      std::vector<Brick> part(c1 - c0);
-      tbb::parallel_for(c0, c1, [&](size_t i) {
-        const size_t b = list[i];
-        Brick& brick = part[i - c0];
-        brick.origin = source.origin(b);
-        for (int off = 0; off < kBrickVoxels; ++off) {
-          double d;
-          if (!source.value(b, off, brick.origin + brickLocal(off), &d) || segmentOf(std::abs(d)) != s) continue;
-          brick.values[off] = float(d * h);
-          brick.mask.set(off);
-        }
-      });
-      // A brick spanning segments s-1..s+1 may hold none of segment s: only bricks with voxels are delivered.
-      part.erase(std::remove_if(part.begin(), part.end(), [](const Brick& b) { return b.mask.empty(); }), part.end());
-      for (const Brick& b : part) stats.voxels += b.mask.count();
-      stats.bricks += int64_t(part.size());
-      const bool done = c1 >= list.size();
-      if (options.max_chunk_bricks) {
-        SegmentBricks p;
-        p.index = s;
-        p.lower_world = stats.lower_world;
-        p.upper_world = stats.upper_world;
-        p.complete = done;
-        p.last = done && s + 1 == segments;
-        p.bricks = std::move(part);
-        if (on_segment) on_segment(std::move(p));
-      } else {
-        whole.bricks.insert(whole.bricks.end(), std::make_move_iterator(part.begin()),
-                            std::make_move_iterator(part.end()));
-      }
-      if (done) break;
-      c0 = c1;
-    }
-    if (!options.max_chunk_bricks) {
-      whole.index = s;
-      whole.lower_world = stats.lower_world;
-      whole.upper_world = stats.upper_world;
-      whole.last = s + 1 == segments;
-      if (on_segment) on_segment(std::move(whole));
-    }
-    std::vector<uint32_t>().swap(by_segment[size_t(s)]);
-    stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
-    result->voxels += stats.voxels;
-    result->segments.push_back(stats);
-  }
-  return true;
 }
 
 /// The whole grid: every voxel, from dense squared distances.

@@ -7,7 +7,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-#include "core/separable_edt.h"
+#include "core/planned_field.h"
 #include "proto/brick_codec.h"
 #include "server/seed_builder.h"
 
@@ -49,28 +49,27 @@ void QueryJob::run() {
       options.threads = 0;  // the shared arena we are executing in
       options.interrupter = interrupter_;
       options.max_chunk_bricks = kQueryChunkBricks;
-      if (query_.plan.algorithm == FieldAlgorithm::kSeparable) {  // an exact volume: no seeds to build
-        segment_started_ = Clock::now();
-        result_ = computeSeparableVolumeField(query_.engineGrid(), *query_.asset->mask, query_.plan.inside_negative,
-                                              options, [this](SegmentBricks&& s) { emitChunk(std::move(s)); });
-        return;
-      }
-      const auto t0 = Clock::now();
+      const bool volume_mask = query_.plan.algorithm == FieldAlgorithm::kSeparable &&
+                               query_.plan.seeds == SeedKind::kVolume;  // the separable EDT reads the mask itself
       Seeds seeds;
-      const std::string e = buildSeeds(query_, &seeds, interrupter_);
-      seed_seconds_ = secondsBetween(t0, Clock::now());
-      if (interrupter_->interrupted()) {
-        result_.interrupted = true;
-        return;
-      }
-      if (!e.empty()) {
-        // Every rule a request can break was checked before compute: what fails here is the server's fault.
-        status_ = Status::Internal("seeds: " + e);
-        return;
+      if (!volume_mask) {
+        const auto t0 = Clock::now();
+        const std::string e = buildSeeds(query_, &seeds, interrupter_);
+        seed_seconds_ = secondsBetween(t0, Clock::now());
+        if (interrupter_->interrupted()) {
+          result_.interrupted = true;
+          return;
+        }
+        if (!e.empty()) {
+          // Every rule a request can break was checked before compute: what fails here is the server's fault.
+          status_ = Status::Internal("seeds: " + e);
+          return;
+        }
       }
       segment_started_ = Clock::now();
-      result_ = computeDistanceField(query_.engineGrid(), std::move(seeds), options,
-                                     [this](SegmentBricks&& s) { emitChunk(std::move(s)); });
+      result_ = computePlannedField(query_.plan, query_.engineGrid(), std::move(seeds),
+                                    volume_mask ? query_.asset->mask.get() : nullptr, options,
+                                    [this](SegmentBricks&& s) { emitChunk(std::move(s)); });
     });
   } catch (const std::bad_alloc&) {
     status_ = Status::ResourceExhausted(

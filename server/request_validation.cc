@@ -225,6 +225,8 @@ void estimateMemory(ResolvedQuery* q) {
     case SeedKind::kPoints:
       in.seed_kind = FieldMemoryInput::SeedKind::kPoints;
       in.points = q->points.size();
+      if (in.separable && q->plan.point_layout)
+        in.separable_plane_voxels = uint64_t(q->plan.point_layout->planes) * grid.dims().x * grid.dims().y;
       for (const Vec3d& p : q->points) extent.addPoint(grid.indexOf(p));
       break;
     case SeedKind::kVolume:
@@ -349,6 +351,7 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
                       ? options.batch_bytes
                       : std::clamp<uint32_t>(r.max_batch_bytes(), 64u << 10, options.max_message_bytes);
 
+  if (q.seed_kind == SeedKind::kPoints) fr.point_layout = pointLayout(q.points);  // the planner's cost model
   if (!r.has_grid()) return invalid("grid must be set (voxel_size or resolution, or dims)");
   if (Status s = resolveGrid(r.grid(), q, r.has_tile(), fr, &q.grid, &q.padding); !s.ok()) return s;
   if (std::string e = planField(fr, q.grid, q.seed_kind == SeedKind::kMesh ? &q.asset->mesh_report : nullptr, &q.plan);

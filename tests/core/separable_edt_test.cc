@@ -13,6 +13,7 @@
 #include "core/field_plan.h"
 #include "core/separable_edt.h"
 #include "tests/support/exact_edt.h"
+#include "tests/support/segment_collector.h"
 
 namespace distband {
 namespace {
@@ -32,46 +33,12 @@ std::vector<uint8_t> randomBlobs(const Coord& d, int count, uint64_t seed) {
   return mask;
 }
 
-struct Collected {
-  std::vector<float> values;
-  std::vector<int> times_delivered;
-  std::string order_error;
-  EngineResult result;
-};
+using Collected = CollectedField;
 
 Collected run(const Grid& grid, const std::vector<uint8_t>& mask, bool inside_negative, const EngineOptions& o) {
-  Collected c;
-  c.values.assign(size_t(grid.voxelCount()), NAN);
-  c.times_delivered.assign(size_t(grid.voxelCount()), 0);
-  int open_segment = 0;
-  bool saw_last = false;
-  c.result = computeSeparableVolumeField(grid, mask, inside_negative, o, [&](SegmentBricks&& s) {
-    if (s.index != open_segment) c.order_error = "segment out of order";
-    if (saw_last) c.order_error = "bricks after the last segment";
-    for (size_t i = 1; i < s.bricks.size(); ++i) {
-      const Coord a = s.bricks[i - 1].origin, b = s.bricks[i].origin;
-      if (std::tie(a.z, a.y, a.x) >= std::tie(b.z, b.y, b.x)) c.order_error = "bricks not sorted";
-    }
-    if (o.max_chunk_bricks && s.bricks.size() > o.max_chunk_bricks) c.order_error = "chunk too large";
-    for (const Brick& b : s.bricks) {
-      if (b.mask.empty()) c.order_error = "an empty brick";
-      for (int i = 0; i < kBrickVoxels; ++i) {
-        if (!b.mask.test(i)) continue;
-        const Coord v = b.origin + brickLocal(i);
-        const size_t k = size_t(grid.denseIndex(v));
-        c.values[k] = b.values[i];
-        ++c.times_delivered[k];
-        const double d = std::abs(b.values[i]);
-        const bool in = s.index == 0 ? d <= s.upper_world * (1 + 1e-6) : d > s.lower_world * (1 - 1e-6) &&
-                                                                          d <= s.upper_world * (1 + 1e-6);
-        if (!in) c.order_error = "a voxel outside its segment's range";
-      }
-    }
-    if (s.complete) ++open_segment;
-    saw_last |= s.last;
+  return collectSegments(grid, o, [&](const SegmentCallback& on_segment) {
+    return computeSeparableVolumeField(grid, mask, inside_negative, o, on_segment);
   });
-  if (!saw_last && !c.result.interrupted) c.order_error = "no last segment";
-  return c;
 }
 
 TEST(SeparableEdtTest, MatchesTheExactEdtUnsignedAndSignedWithSegmentsAndChunks) {

@@ -369,6 +369,21 @@ TEST_F(ResolveQueryTest, PointsAreResolvedInWorldCoordinates) {
   EXPECT_FALSE(q.tile.has_value());
 }
 
+TEST_F(ResolveQueryTest, FewPointsWithoutLimitUseTheSeparablePointEdtAndAreChargedForIt) {
+  const ResolvedQuery q = resolveOk(pointsOnDims());  // two points on a 32^3 grid
+  EXPECT_EQ(q.plan.algorithm, FieldAlgorithm::kSeparable);
+  ASSERT_TRUE(q.plan.point_layout.has_value());
+  EXPECT_EQ(q.plan.point_layout->planes, 2);
+  // A nearest-point index per voxel and pass 2's 12 bytes per (plane, x, y): at least 4 bytes a voxel.
+  EXPECT_GE(q.memory.engine_bytes, 32u * 32 * 32 * 4 + 2u * 32 * 32 * 12);
+  v1::QueryRequest limited = pointsOnDims();
+  limited.set_limit(4);
+  EXPECT_EQ(resolveOk(limited).plan.algorithm, FieldAlgorithm::kBand) << "a limit: the band's work follows it";
+  v1::QueryRequest spread = pointsOnDims();  // points on 20 planes of a 32^3 grid: more than the separable pass pays for
+  for (int i = 0; i < 18; ++i) setVec(spread.mutable_points()->add_points(), i, i, i + 0.5);
+  EXPECT_EQ(resolveOk(spread).plan.algorithm, FieldAlgorithm::kBand);
+}
+
 TEST_F(ResolveQueryTest, InlineMeshNeedsItsParsedAsset) {
   ResolvedQuery q;
   const Status s = resolveQuery(inlineCube(), options, cache, nullptr, &q);
@@ -434,7 +449,7 @@ TEST_F(ResolveQueryTest, DefaultsOfUnsetChoices) {
   EXPECT_EQ(q.plan.segment_length_world, 0);
   EXPECT_EQ(closestOf(q.plan), v1::CLOSEST_FEATURE_NONE);
   EXPECT_EQ(q.batch_bytes, options.batch_bytes);
-  EXPECT_EQ(q.plan.algorithm, FieldAlgorithm::kBand) << "the separable EDT is for volumes only";
+  EXPECT_EQ(q.plan.algorithm, FieldAlgorithm::kSeparable) << "two points, no limit: the separable point EDT";
 }
 
 TEST_F(ResolveQueryTest, ExplicitChoicesAreKept) {
