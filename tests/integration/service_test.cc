@@ -98,6 +98,37 @@ TEST(ServiceTest, Float16EncodingRoundsEachValue) {
   expectBitIdentical(*s.field, ref);
 }
 
+// A few points without a limit take the separable point EDT: the header says so, and the stream equals the band's
+// field bit for bit, closest points included, nearest segment first.
+TEST(ServiceTest, FewPointsWithoutLimitAreTheSeparablePointEdtBitForBit) {
+  TestServer ts;
+  const Coord dims{41, 35, 30};
+  const double h = 0.5;
+  const std::vector<Vec3d> pts{{5.2, 6.1, 7.7}, {18.0, 12.5, 7.7}, {9.0, 12.5, 7.7}, {30.0, -4.0, 40.0}};
+  v1::QueryRequest r = pointsRequest(pts, dims, h, 3.0, 0);
+  r.set_closest_feature(true);
+  Streamed s = stream(ts.client(), r, NAN);
+  ASSERT_TRUE(s.result.status.ok()) << s.result.status.error_message();
+  EXPECT_EQ(s.result.header.algorithm(), "separable");
+  EXPECT_TRUE(s.order_error.empty()) << s.order_error;
+  EXPECT_GT(s.done.size(), 3u);
+  const Grid grid({0, 0, 0}, h, dims);
+  Seeds seeds;
+  ASSERT_EQ(makePointSeeds(grid, pts, &seeds), "");
+  EngineOptions o;
+  o.segment_length_world = 3.0;
+  expectBitIdentical(*s.field, reference(grid, seeds, o, NAN));
+  ASSERT_EQ(s.closest.size(), size_t(grid.voxelCount()));
+  int64_t wrong_closest = 0;
+  for (int64_t i = 0; i < grid.voxelCount(); ++i) {
+    const int64_t id = s.closest[size_t(i)];
+    const Vec3d v{double(i % dims.x), double(i / dims.x % dims.y), double(i / (int64_t(dims.x) * dims.y))};
+    wrong_closest += id < 0 || id >= int64_t(pts.size()) ||
+                     std::abs(std::sqrt((v - seeds.points[size_t(id)]).lengthSqr()) * h - s.field->values()[size_t(i)]) > 1e-5;
+  }
+  EXPECT_EQ(wrong_closest, 0);
+}
+
 TEST(ServiceTest, VolumeUploadAndSignedQueryMatchInProcess) {
   TestServer ts;
   const Coord dims{40, 36, 32};
