@@ -17,13 +17,17 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <iterator>
 #include <limits>
 #include <memory>
+#include <new>
 #include <stdexcept>
 #include <type_traits>
 #include <utility>
 #include <vector>
+
+#include <sys/mman.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -35,10 +39,15 @@
 
 namespace distband {
 
-/// Leaves new elements uninitialised: the separable passes write every element before reading it, so zeroing
-/// hundreds of MB on one thread first would only add a serial pass (and its page faults) to the parallel ones.
+/// For arrays with an entry per grid voxel (or per plane entry). Leaves new elements uninitialised: the separable
+/// passes write every element before reading it, so zeroing hundreds of MB on one thread first would only add a serial
+/// pass (and its page faults) to the parallel ones. Arrays of 8 MiB or more are 2 MiB-aligned and ask for transparent
+/// huge pages: their first touches (page faults) and the z pass's strided accesses (TLB misses, a page per slice) were
+/// the largest costs of a whole-grid field after the passes themselves.
 template <class T>
 struct NoInitAllocator : std::allocator<T> {
+  static constexpr size_t kHugePage = size_t(2) << 20;
+  static constexpr size_t kHugeFrom = size_t(8) << 20;
   template <class U>
   struct rebind {
     using other = NoInitAllocator<U>;
@@ -46,6 +55,24 @@ struct NoInitAllocator : std::allocator<T> {
   NoInitAllocator() = default;
   template <class U>
   NoInitAllocator(const NoInitAllocator<U>&) {}
+  T* allocate(size_t n) {
+    if (n > std::numeric_limits<size_t>::max() / sizeof(T)) throw std::bad_array_new_length();
+    const size_t bytes = n * sizeof(T);
+    if (bytes < kHugeFrom) return std::allocator<T>::allocate(n);
+    const size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+    void* p = std::aligned_alloc(kHugePage, rounded);
+    if (!p) throw std::bad_alloc();
+#ifdef MADV_HUGEPAGE
+    ::madvise(p, rounded, MADV_HUGEPAGE);  // advice only: without it, 4 KiB pages
+#endif
+    return static_cast<T*>(p);
+  }
+  void deallocate(T* p, size_t n) {
+    if (n * sizeof(T) < kHugeFrom)
+      std::allocator<T>::deallocate(p, n);
+    else
+      std::free(p);
+  }
   template <class U>
   void construct(U* p) noexcept {
     ::new (static_cast<void*>(p)) U;
