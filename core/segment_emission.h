@@ -9,8 +9,8 @@
 //   its signed distance d in voxels (called from many threads, twice per voxel: once to sort bricks into segments,
 //   once to fill them); optionally `static constexpr bool kHasFeatures = true` and int64_t feature(i, offset, voxel),
 //   the voxel's closest feature (Brick::closest, with options.closest_features; asking a source without features
-//   throws std::invalid_argument). Returns false when options.interrupter stopped it (polled per 64 bricks and per
-//   chunk).
+//   throws std::invalid_argument). Returns false when options.interrupter stopped it (polled per 64 bricks while
+//   sorting, per 16 while filling, and per chunk).
 #pragma once
 
 #include <algorithm>
@@ -131,7 +131,9 @@ bool emitSegments(const Grid& grid, const EngineOptions& options, const Source& 
   std::vector<int>().swap(first);
   std::vector<int>().swap(last);
 
-  const size_t per_chunk = options.max_chunk_bricks ? options.max_chunk_bricks : std::numeric_limits<size_t>::max();
+  // Without chunking a segment is built in one piece, where it is delivered: no second copy of its bricks.
+  const size_t per_chunk =
+      options.max_chunk_bricks ? std::min<size_t>(options.max_chunk_bricks, 8192) : std::numeric_limits<size_t>::max();
   for (int s = 0; s < segments; ++s) {
     const auto ts = Clock::now();
     SegmentStats stats;
@@ -140,53 +142,44 @@ bool emitSegments(const Grid& grid, const EngineOptions& options, const Source& 
     stats.upper_world = std::min(length > 0 ? (s + 1) * length * h : std::numeric_limits<double>::infinity(),
                                  options.limit_world);
     const std::vector<uint32_t>& list = by_segment[size_t(s)];
-    SegmentBricks whole;
     for (size_t c0 = 0; c0 < list.size() || c0 == 0;) {
       if (isInterrupted(interrupter)) return false;
-      const size_t c1 = std::min(list.size(), c0 + std::min<size_t>(per_chunk, 8192));
+      const size_t c1 = list.size() - c0 <= per_chunk ? list.size() : c0 + per_chunk;
       std::vector<Brick> part(c1 - c0);
-      tbb::parallel_for(c0, c1, [&](size_t i) {
-        const size_t b = list[i];
-        Brick& brick = part[i - c0];
-        brick.origin = source.origin(b);
-        if (closest) brick.closest.assign(kBrickVoxels, -1);
-        for (int off = 0; off < kBrickVoxels; ++off) {
-          double d;
-          const Coord c = brick.origin + brickLocal(off);
-          if (!source.value(b, off, c, &d) || segmentOf(std::abs(d)) != s) continue;
-          brick.values[off] = float(d * h);
-          brick.mask.set(off);
-          if constexpr (SourceHasFeatures<Source>::value)
-            if (closest) brick.closest[off] = source.feature(b, off, c);
+      tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 16), [&](const tbb::blocked_range<size_t>& r) {
+        if (isInterrupted(interrupter)) return;
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+          const size_t b = list[i];
+          Brick& brick = part[i - c0];
+          brick.origin = source.origin(b);
+          if (closest) brick.closest.assign(kBrickVoxels, -1);
+          for (int off = 0; off < kBrickVoxels; ++off) {
+            double d;
+            const Coord c = brick.origin + brickLocal(off);
+            if (!source.value(b, off, c, &d) || segmentOf(std::abs(d)) != s) continue;
+            brick.values[off] = float(d * h);
+            brick.mask.set(off);
+            if constexpr (SourceHasFeatures<Source>::value)
+              if (closest) brick.closest[off] = source.feature(b, off, c);
+          }
         }
       });
+      if (isInterrupted(interrupter)) return false;
       // A brick spanning segments s-1..s+1 may hold none of segment s: only bricks with voxels are delivered.
       part.erase(std::remove_if(part.begin(), part.end(), [](const Brick& b) { return b.mask.empty(); }), part.end());
       for (const Brick& b : part) stats.voxels += b.mask.count();
       stats.bricks += int64_t(part.size());
       const bool done = c1 >= list.size();
-      if (options.max_chunk_bricks) {
-        SegmentBricks p;
-        p.index = s;
-        p.lower_world = stats.lower_world;
-        p.upper_world = stats.upper_world;
-        p.complete = done;
-        p.last = done && s + 1 == segments;
-        p.bricks = std::move(part);
-        if (on_segment) on_segment(std::move(p));
-      } else {
-        whole.bricks.insert(whole.bricks.end(), std::make_move_iterator(part.begin()),
-                            std::make_move_iterator(part.end()));
-      }
+      SegmentBricks p;
+      p.index = s;
+      p.lower_world = stats.lower_world;
+      p.upper_world = stats.upper_world;
+      p.complete = done;
+      p.last = done && s + 1 == segments;
+      p.bricks = std::move(part);
+      if (on_segment) on_segment(std::move(p));
       if (done) break;
       c0 = c1;
-    }
-    if (!options.max_chunk_bricks) {
-      whole.index = s;
-      whole.lower_world = stats.lower_world;
-      whole.upper_world = stats.upper_world;
-      whole.last = s + 1 == segments;
-      if (on_segment) on_segment(std::move(whole));
     }
     std::vector<uint32_t>().swap(by_segment[size_t(s)]);
     stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
