@@ -74,10 +74,13 @@ struct Layout {
   std::vector<Plane> planes;
 };
 
+// Points beyond double range in index space (a finite world point on a tiny voxel size) are infinitely far from every
+// voxel: they join no line, and if no point is left, every voxel's nearest is point 0, at an infinite distance.
 Layout layoutOf(const std::vector<Vec3d>& points) {
   Layout l;
-  l.order.resize(points.size());
-  std::iota(l.order.begin(), l.order.end(), 0u);
+  for (uint32_t i = 0; i < uint32_t(points.size()); ++i)
+    if (std::isfinite(points[i].x) && std::isfinite(points[i].y) && std::isfinite(points[i].z)) l.order.push_back(i);
+  if (l.order.empty()) l.order.push_back(0);
   tbb::parallel_sort(l.order.begin(), l.order.end(), [&](uint32_t a, uint32_t b) {
     const Vec3d &p = points[a], &q = points[b];
     return std::tie(p.z, p.y, p.x, a) < std::tie(q.z, q.y, q.x, b);
@@ -240,9 +243,6 @@ EngineResult computeSeparablePointField(const Grid& grid, const Seeds& seeds, co
                                             seeds.points.size()));
   if (!seeds.site_feature.empty() && seeds.site_feature.size() != seeds.points.size())
     throw std::invalid_argument("site_feature must be empty or hold one feature per point");
-  for (const Vec3d& p : seeds.points)
-    if (!(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)))
-      throw std::invalid_argument("the separable point EDT needs finite points");
   if (!std::isinf(options.limit_world) || !(options.limit_world > 0))
     throw std::invalid_argument(
         fmt::format("the separable point EDT computes the whole grid: limit must be +infinity (got {})",

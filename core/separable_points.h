@@ -18,6 +18,8 @@
 //   * Streaming, threads, interrupter: as computeSeparableVolumeField (core/separable_edt.h): segments nearest first
 //     after the whole field is known, chunks, bit-identical for any thread count, polled per task in every pass.
 //     Closest features (options.closest_features): the point's index, or site_feature[index] when that is set.
+//   * Points that are not finite in index space (a huge world coordinate on a tiny voxel size) are infinitely far, as
+//     in the band: they are nobody's nearest point unless every point is such, and then every distance is infinite.
 // Errors (seed kind, no points, grid, a finite limit) throw std::invalid_argument.
 #pragma once
 

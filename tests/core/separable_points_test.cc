@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <functional>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -137,9 +138,24 @@ TEST(SeparablePointsTest, RejectsWhatItCannotCompute) {
   Seeds triangles = seeds;
   triangles.kind = SiteKind::kTriangle;
   EXPECT_THROW(computeSeparablePointField(grid, triangles, {}, {}), std::invalid_argument);
-  Seeds nan = seeds;
-  nan.points[0].y = NAN;
-  EXPECT_THROW(computeSeparablePointField(grid, nan, {}, {}), std::invalid_argument);
+}
+
+TEST(SeparablePointsTest, PointsBeyondDoubleRangeAreInfinitelyFarAsInTheBand) {
+  const Grid grid({0, 0, 0}, 1, {20, 17, 12});
+  Seeds seeds;
+  ASSERT_EQ(makePointSeeds(grid, {{3, 4, 5}, {0, 0, 11}, {9.5, 2, 7}}, &seeds), "");
+  // What indexOf makes of a world coordinate near 1e308 on a voxel size of 1e-300; the point's band voxels stay where
+  // makePointSeeds clamped them.
+  const double inf = std::numeric_limits<double>::infinity();
+  seeds.points[1] = {inf, 4, -inf};
+  for (int all_infinite = 0; all_infinite < 2; ++all_infinite) {
+    if (all_infinite) seeds.points = {{inf, 1, 2}, {3, -inf, 2}, {3, 1, inf}};
+    const CollectedField separable = runSeparable(grid, seeds, {});
+    const CollectedField band = runBand(grid, seeds, {});
+    ASSERT_EQ(separable.result.voxels, grid.voxelCount());
+    EXPECT_EQ(std::memcmp(separable.values.data(), band.values.data(), band.values.size() * sizeof(float)), 0);
+    EXPECT_EQ(std::isinf(separable.values[0]), bool(all_infinite));
+  }
 }
 
 TEST(SeparablePointsTest, LayoutCountsLinesAndPlanesAndThePlannerChoosesByIt) {
