@@ -93,8 +93,13 @@ bool emitSegment(BandState& s, const SegmentCallback& cb, int index, double lowe
     if (s.stopping()) return true;
     size_t c1 = c0, outs = 0;
     while (c1 < n && outs < per_chunk && c1 - c0 < kBuildBricks) outs += slot[c1++] != 0;
-    part.assign(outs, Brick{});
-    buildChunk(s, c0, c1, slot, keep, base, part);
+    // Whole segments are built where they are delivered (no second copy of 2 KiB a brick on one thread); chunks apart.
+    std::vector<Brick>& out = max_chunk ? part : whole.bricks;
+    if (max_chunk)
+      part.assign(outs, Brick{});
+    else
+      whole.bricks.resize(base + outs);
+    buildChunk(s, c0, c1, slot, keep, max_chunk ? base : 0, out);
     if (last) {
       for (size_t i = c0; i < c1; ++i) s.table.release(pending[i]);
       freed_bytes += (c1 - c0) * sizeof(BrickState);
@@ -103,8 +108,8 @@ bool emitSegment(BandState& s, const SegmentCallback& cb, int index, double lowe
         freed_bytes = 0;
       }
     }
-    for (const Brick& b : part) stats.voxels += b.mask.count();
-    stats.bricks += int64_t(part.size());
+    for (size_t i = out.size() - outs; i < out.size(); ++i) stats.voxels += out[i].mask.count();
+    stats.bricks += int64_t(outs);
     base += uint32_t(outs);
     const bool done = c1 >= n;
     if (max_chunk) {
@@ -112,8 +117,6 @@ bool emitSegment(BandState& s, const SegmentCallback& cb, int index, double lowe
       SegmentBricks p = piece(done);
       p.bricks = std::move(part);
       if (cb) cb(std::move(p));
-    } else {
-      whole.bricks.insert(whole.bricks.end(), part.begin(), part.end());
     }
     if (done) break;
     c0 = c1;
