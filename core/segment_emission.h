@@ -88,6 +88,13 @@ struct SourceHasFeatures : std::false_type {};
 template <typename Source>
 struct SourceHasFeatures<Source, std::enable_if_t<Source::kHasFeatures>> : std::true_type {};
 
+/// The brick list of a whole-grid source: every brick of the grid, in (z, y, x) order.
+struct WholeGridBricks {
+  const Grid& grid;
+  size_t count() const { return size_t(grid.brickCount()); }
+  Coord origin(size_t b) const { return grid.brickOrigin(int64_t(b)); }
+};
+
 /// Streams `source` (see the contract above). False when interrupted.
 template <typename Source>
 bool emitSegments(const Grid& grid, const EngineOptions& options, const Source& source, EngineResult* result,

@@ -97,14 +97,11 @@ bool squaredDistances(const Coord& dims, const std::vector<uint8_t>& mask, bool 
 }
 
 /// The whole grid: every voxel, from dense squared distances.
-struct WholeGridSource {
-  const Grid& grid;
+struct WholeGridSource : WholeGridBricks {
   const std::vector<uint8_t>& mask;
   bool inside_negative;
   const GridSquares& outside;
   const GridSquares& inside;
-  size_t count() const { return size_t(grid.brickCount()); }
-  Coord origin(size_t b) const { return grid.brickOrigin(int64_t(b)); }
   bool value(size_t, int, const Coord& c, double* d) const {
     if (!grid.contains(c)) return false;
     const size_t v = size_t(grid.denseIndex(c));
@@ -158,7 +155,7 @@ EngineResult computeSeparableVolumeField(const Grid& grid, const std::vector<uin
       GridSquares outside, inside;  // squared distances (voxels) to the mask, and (signed) to its outside
       ok = squaredDistances(dims, mask, true, interrupter, &outside) &&
            (!inside_negative || squaredDistances(dims, mask, false, interrupter, &inside)) &&
-           emitSegments(grid, options, WholeGridSource{grid, mask, inside_negative, outside, inside}, &result,
+           emitSegments(grid, options, WholeGridSource{{grid}, mask, inside_negative, outside, inside}, &result,
                         on_segment);
     } else {
       // Delivered: squared distance <= limit^2 (voxels), an integer bound on the integer squared distances.

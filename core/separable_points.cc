@@ -192,13 +192,10 @@ bool nearestPoints(const Coord& dims, const Coord& offset, const Layout& l, cons
 }
 
 /// Every voxel of the grid, its distance computed from its nearest point as the band engine computes it.
-struct NearestPointSource {
+struct NearestPointSource : WholeGridBricks {
   static constexpr bool kHasFeatures = true;
-  const Grid& grid;
   const Seeds& seeds;
   const NearestPoints& nearest;
-  size_t count() const { return size_t(grid.brickCount()); }
-  Coord origin(size_t b) const { return grid.brickOrigin(int64_t(b)); }
   bool value(size_t, int, const Coord& c, double* d) const {
     if (!grid.contains(c)) return false;
     const Coord& o = seeds.site_offset;
@@ -254,7 +251,7 @@ EngineResult computeSeparablePointField(const Grid& grid, const Seeds& seeds, co
     NearestPoints nearest;
     const bool ok =
         nearestPoints(grid.dims(), seeds.site_offset, layout, options.interrupter, &nearest) &&
-        emitSegments(grid, options, NearestPointSource{grid, seeds, nearest}, &result, on_segment);
+        emitSegments(grid, options, NearestPointSource{{grid}, seeds, nearest}, &result, on_segment);
     result.interrupted = !ok;
     result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   });

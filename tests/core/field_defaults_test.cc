@@ -150,6 +150,52 @@ TEST(FieldDefaultsTest, PlannerDecidesModeSitesStencilSignAndLimit) {
   EXPECT_NE(planField(no_report, grid, nullptr, &p), "");
 }
 
+// The algorithm: the separable EDTs where they compute the same exact field faster, the band where the request asks
+// for the propagation itself or the separable passes cannot follow it.
+TEST(FieldDefaultsTest, PlannerPicksTheSeparableEdtsOnlyWhereTheyDeliverTheSameField) {
+  const Grid grid({0, 0, 0}, 1, {64, 64, 64});
+  using Change = std::function<void(FieldRequest&)>;
+  struct Case {
+    const char* what;
+    SeedKind seeds;  // points: two, on two planes, unless the change says otherwise
+    Change change;
+    FieldAlgorithm expect;
+  };
+  const Change none = [](FieldRequest&) {};
+  const Change limit = [](FieldRequest& r) { r.limit_voxels = 5; };
+  const Change stencil = [](FieldRequest& r) { r.stencil = StencilKind::kFcc12; };
+  const Change paper = [](FieldRequest& r) { r.mode = PropagationMode::kPaper; };
+  const Change second_ring = [](FieldRequest& r) { r.second_ring = true; };
+  const Change closest = [](FieldRequest& r) { r.closest_features = true; };
+  const auto volume = SeedKind::kVolume, points = SeedKind::kPoints;
+  const auto separable = FieldAlgorithm::kSeparable, band = FieldAlgorithm::kBand;
+  const Case cases[] = {
+      {"volume", volume, none, separable},
+      {"volume, limit", volume, limit, separable},
+      {"volume, stencil", volume, stencil, band},
+      {"volume, paper", volume, paper, band},
+      {"volume, second ring", volume, second_ring, band},
+      {"volume, closest (the propagation's sites)", volume, closest, band},
+      {"two points", points, none, separable},
+      {"two points, closest (carried by the passes)", points, closest, separable},
+      {"two points, limit (the band's work follows it)", points, limit, band},
+      {"two points, stencil", points, stencil, band},
+      {"two points, paper", points, paper, band},
+      {"two points, second ring", points, second_ring, band},
+      {"points, layout unknown", points, [](FieldRequest& r) { r.point_layout.reset(); }, band},
+      {"points on 40 of 64 planes", points, [](FieldRequest& r) { r.point_layout = PointLayout{40, 40, 40}; }, band},
+  };
+  for (const Case& c : cases) {
+    FieldRequest r;
+    r.seeds = c.seeds;
+    if (c.seeds == points) r.point_layout = PointLayout{2, 2, 2};
+    c.change(r);
+    FieldPlan p;
+    ASSERT_EQ(planField(r, grid, nullptr, &p), "") << c.what;
+    EXPECT_EQ(p.algorithm, c.expect) << c.what;
+  }
+}
+
 TEST(FieldDefaultsTest, AutoSignIsPseudonormalForClosedAndWindingForOpenMeshes) {
   MeshReport closed;
   std::string why;

@@ -1,7 +1,7 @@
 // Tests for core/separable_edt: the whole-grid volume field against the exact EDT oracle (tests/support/exact_edt,
 // which shares no code with core/), streamed under the band engine's contract (segments nearest first, each voxel
-// once, bricks sorted, chunks), identical for any thread count, stopped by its interrupter; and the planner's
-// choice of it.
+// once, bricks sorted, chunks), identical for any thread count, stopped by its interrupter. The planner's choice of
+// it: tests/core/field_defaults_test.cc.
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -10,7 +10,6 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
-#include "core/field_plan.h"
 #include "core/separable_edt.h"
 #include "tests/support/exact_edt.h"
 #include "tests/support/segment_collector.h"
@@ -173,28 +172,6 @@ TEST(SeparableEdtTest, RejectsMasksItCannotMeasure) {
   EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(512, 0), false, {}, {}), std::invalid_argument);
   EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(512, 1), true, {}, {}), std::invalid_argument);
   EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(100, 1), false, {}, {}), std::invalid_argument);
-}
-
-TEST(SeparableEdtTest, ThePlannerPicksItForExactVolumesOnly) {
-  const Grid grid({0, 0, 0}, 1, {16, 16, 16});
-  FieldPlan p;
-  FieldRequest r;
-  r.seeds = SeedKind::kVolume;
-  ASSERT_EQ(planField(r, grid, nullptr, &p), "");
-  EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
-  FieldRequest limited = r;
-  limited.limit_world = 5;  // a limit: the separable passes over the bricks within it
-  ASSERT_EQ(planField(limited, grid, nullptr, &p), "");
-  EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
-  for (auto change : {+[](FieldRequest& f) { f.stencil = StencilKind::kCubic26; },
-                      +[](FieldRequest& f) { f.mode = PropagationMode::kPaper; },
-                      +[](FieldRequest& f) { f.closest_features = true; },
-                      +[](FieldRequest& f) { f.seeds = SeedKind::kPoints; }}) {
-    FieldRequest other = r;
-    change(other);
-    ASSERT_EQ(planField(other, grid, nullptr, &p), "");
-    EXPECT_EQ(p.algorithm, FieldAlgorithm::kBand);
-  }
 }
 
 }  // namespace

@@ -2,17 +2,16 @@
 // which shares no code with core/) and bit-identical to the band engine's values, for points off the lattice, on
 // shared lines and planes, duplicated, outside the grid and far away; streamed under the engine's contract (segments,
 // chunks), with closest features; identical for any thread count; a tile equal to the whole grid; stopped by its
-// interrupter; its preconditions; the layout counts and the planner's choice.
+// interrupter; its preconditions; the layout counts and its cost rule (the planner's use of it:
+// tests/core/field_defaults_test.cc).
 #include <cmath>
 #include <cstring>
-#include <functional>
 #include <limits>
 #include <random>
 #include <vector>
 
 #include <gtest/gtest.h>
 
-#include "core/field_plan.h"
 #include "core/seeds/point_seeds.h"
 #include "core/separable_points.h"
 #include "tests/support/brute_force.h"
@@ -158,7 +157,7 @@ TEST(SeparablePointsTest, PointsBeyondDoubleRangeAreInfinitelyFarAsInTheBand) {
   }
 }
 
-TEST(SeparablePointsTest, LayoutCountsLinesAndPlanesAndThePlannerChoosesByIt) {
+TEST(SeparablePointsTest, LayoutCountsLinesAndPlanesAndItPaysOnFewPlanes) {
   const PointLayout l = pointLayout({{1, 2, 3}, {5, 2, 3}, {1, 4, 3}, {1, 2, 9}, {1, 2, 3}});
   EXPECT_EQ(l.points, 5);
   EXPECT_EQ(l.lines, 3);   // (2, 3), (4, 3), (2, 9)
@@ -169,30 +168,6 @@ TEST(SeparablePointsTest, LayoutCountsLinesAndPlanesAndThePlannerChoosesByIt) {
   EXPECT_FALSE(separablePointsPay(dims, {100, 100, 15}));  // a point cloud spread over many planes: the band
   EXPECT_TRUE(separablePointsPay(dims, {900, 900, 1}));
   EXPECT_FALSE(separablePointsPay(dims, {1000, 1000, 1}));  // too many lines
-
-  const Grid grid({0, 0, 0}, 1, dims);
-  FieldRequest r;
-  r.seeds = SeedKind::kPoints;
-  FieldPlan p;
-  ASSERT_EQ(planField(r, grid, nullptr, &p), "");
-  EXPECT_EQ(p.algorithm, FieldAlgorithm::kBand);  // no layout given
-  r.point_layout = l;
-  ASSERT_EQ(planField(r, grid, nullptr, &p), "");
-  EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
-  r.closest_features = true;  // the separable pass carries the closest point
-  ASSERT_EQ(planField(r, grid, nullptr, &p), "");
-  EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
-  for (auto change : std::vector<std::function<void(FieldRequest&)>>{
-           [](FieldRequest& q) { q.limit_voxels = 5; },                    // a limit: the band's work follows it
-           [](FieldRequest& q) { q.stencil = StencilKind::kFcc12; },       // the propagation itself asked for
-           [](FieldRequest& q) { q.mode = PropagationMode::kPaper; },
-           [](FieldRequest& q) { q.second_ring = true; },
-           [](FieldRequest& q) { q.point_layout = PointLayout{100, 100, 40}; }}) {  // too many planes
-    FieldRequest q = r;
-    change(q);
-    ASSERT_EQ(planField(q, grid, nullptr, &p), "");
-    EXPECT_EQ(p.algorithm, FieldAlgorithm::kBand);
-  }
 }
 
 }  // namespace
