@@ -282,7 +282,9 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   ctx.out << fmt::format("distband compute: {}, voxel size {:g}, {}, mode {}, segment {}, limit {}, threads {}\n",
                          in.description, in.grid.voxelSize(),
                          in.plan.algorithm == FieldAlgorithm::kSeparable
-                             ? std::string(std::isfinite(limit)
+                             ? std::string(in.plan.seeds == SeedKind::kPoints
+                                               ? "algorithm separable (exact point EDT over the whole grid)"
+                                           : std::isfinite(limit)
                                                ? "algorithm separable (exact EDT over the bricks within the limit)"
                                                : "algorithm separable (exact EDT over the whole grid)")
                              : fmt::format("stencil {}", stencilName(stencil)),
