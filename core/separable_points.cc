@@ -162,6 +162,17 @@ bool nearestPoints(const Coord& dims, const Coord& offset, const Layout& l, cons
   for (int k = 0; k < planes; ++k) plane_z[size_t(k)] = l.planes[size_t(k)].z;
   NearestPoints& nearest = *out;
   nearest.resize(slice * nz);
+  // First touches in parallel, polled: pass 3 writes across every z slice from its first row on, so left to page faults
+  // the whole array (GBs at 1024^3) would be faulted in by the first rows, between two polls of the interrupter.
+  constexpr size_t kPageEntries = 4096 / sizeof(uint32_t), kTouchEntries = size_t(1) << 19;  // 2 MiB a task
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, nearest.size(), kTouchEntries),
+      [&](const tbb::blocked_range<size_t>& r) {
+        if (isInterrupted(interrupter)) return;
+        for (size_t i = r.begin(); i < r.end(); i += kPageEntries) nearest[i] = 0;
+      },
+      tbb::simple_partitioner());
+  if (isInterrupted(interrupter)) return false;
   tbb::parallel_for(tbb::blocked_range2d<int>(0, ny, 0, x_blocks), [&](const tbb::blocked_range2d<int>& r) {
     std::vector<double> f(size_t(kBlock) * planes), bound(size_t(planes) + 1);
     std::vector<uint32_t> f_point(size_t(kBlock) * planes), column(size_t(kBlock) * nz);
