@@ -12,7 +12,9 @@
 // Cases: mesh seeds with each sign method (armadillo if --mesh-dir has it, else the bunny; half-width 3), the engine
 // on two points (full domain: propagation, second-ring correction and emission in one segment; and in 8 segments),
 // a limited band around a sphere shell volume (seeds and engine), and emission alone (segments of N/16, the consumer
-// cancels from inside a chunk callback of one of the first segments, so the engine is mid-emission). Output: a markdown table (median and max per case).
+// cancels from inside a chunk callback of one of the first segments, so the engine is mid-emission), and the separable
+// EDTs the planner picks for whole-grid points and volumes (their state is freed inside the call: "compute stops"
+// includes it). Output: a markdown table (median and max per case).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -34,6 +36,8 @@
 #include "core/seeds/mesh_seeds.h"
 #include "core/seeds/point_seeds.h"
 #include "core/seeds/volume_seeds.h"
+#include "core/separable_edt.h"
+#include "core/separable_points.h"
 
 #ifndef DISTBAND_BENCH_DIR
 #define DISTBAND_BENCH_DIR "bench"
@@ -131,6 +135,22 @@ int run(int argc, char** argv) {
     const EngineResult r = computeDistanceField(grid, std::move(seeds), o, [](SegmentBricks&&) {});
     return Outcome{r.interrupted, r.release_seconds * 1000};
   };
+  // The algorithms the planner picks for whole-grid points and volumes (core/separable_points.h, separable_edt.h).
+  auto separablePoints = [&](Interrupter& stop) {
+    Seeds seeds;
+    makePointSeeds(grid, two_points, &seeds);
+    EngineOptions o;
+    o.max_chunk_bricks = 1024;
+    o.interrupter = &stop;
+    return Outcome{computeSeparablePointField(grid, seeds, o, [](SegmentBricks&&) {}).interrupted};
+  };
+  auto separableShell = [&](Interrupter& stop) {
+    if (shell.empty()) shell = bench::sphereShellMask(n);
+    EngineOptions o;
+    o.max_chunk_bricks = 1024;
+    o.interrupter = &stop;
+    return Outcome{computeSeparableVolumeField(grid, shell, true, o, [](SegmentBricks&&) {}).interrupted};
+  };
   int chunks_seen = 0;
   std::vector<Case> cases = {
       {"mesh seeds, pseudonormal", meshSeeds(SignMethod::kPseudonormal)},
@@ -143,9 +163,12 @@ int run(int argc, char** argv) {
        engine(n / 16.0, std::numeric_limits<double>::infinity(), 1024,
               [&](const SegmentBricks&) { return --chunks_seen == 0; }),
        true},
+      {"separable point EDT, two points, full domain", separablePoints},
+      {"separable EDT, sphere shell volume (signed), full domain", separableShell},
   };
   const std::vector<std::string> short_names = {"seeds_pseudonormal", "seeds_winding", "seeds_parity", "points_full",
-                                                "points_segments", "shell_band", "emission"};
+                                                "points_segments", "shell_band", "emission", "separable_points",
+                                                "separable_shell"};
 
   std::string md =
       fmt::format("# cancel_bench ({}^3, {} threads, {} samples per case, reference runs capped at {} s; mesh {})\n\n",
