@@ -9,9 +9,12 @@
 //   * Timed: wall seconds from fork to wait4's return, and the child's CPU seconds (user + system, from wait4's
 //     rusage: all its threads). Reported: medians of --reps, and the ratio distband / OpenVDB of each.
 //   * distband's own phase lines ("engine ... s, total ... s (write ... s)") are read from its stdout, so the
-//     in-process part can be told from process start-up and exit.
+//     in-process part can be told from process start-up and exit: load+seeds = total - engine - write (mesh read,
+//     grid, plan, seeds, output set-up), start+exit = wall - total (exec, dynamic loading, static initialisers,
+//     argument parsing, destructors, exit).
 //   * The same job: both files are read back once per row and compared — active voxels of each, voxels active in
 //     both, the largest |difference| over those in voxels, and how many of them disagree in sign.
+//   * --peer-env NAME=VALUE sets the peer's environment (e.g. the malloc tunable distband sets in its main()).
 //   * Output: a Markdown table on stdout (and <out-dir>/<tag>.md), and with --json the rows as JSON.
 //     Files go to a fresh temporary directory, removed at the end.
 #include <sys/resource.h>
@@ -61,8 +64,10 @@ struct ChildRun {
   int status = -1;
 };
 
-// Runs argv[0] with its stdout in `stdout_path` (stderr inherited), waiting for it with its rusage.
-ChildRun runChild(const std::vector<std::string>& args, const std::string& stdout_path) {
+// Runs argv[0] with its stdout in `stdout_path` (stderr inherited) and `env` (NAME=VALUE) added to its environment,
+// waiting for it with its rusage.
+ChildRun runChild(const std::vector<std::string>& args, const std::string& stdout_path,
+                  const std::vector<std::string>& env = {}) {
   std::vector<char*> argv;
   for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
@@ -75,6 +80,7 @@ ChildRun runChild(const std::vector<std::string>& args, const std::string& stdou
       dup2(fd, STDOUT_FILENO);
       close(fd);
     }
+    for (const std::string& e : env) putenv(const_cast<char*>(e.c_str()));
     execv(argv[0], argv.data());
     _exit(127);
   }
@@ -149,14 +155,18 @@ int main(int argc, char** argv) {
   int half_width = 3, reps = 5;
   std::string distband_bin = DISTBAND_CLI_BIN, peer_bin = DISTBAND_PEER_BIN;
   std::string out_dir = DISTBAND_BENCH_DIR "/results", tag, json_path;
+  std::vector<std::string> peer_env;
   app.add_option("--mesh-dir", mesh_dir);
-  app.add_option("--meshes", meshes);
-  app.add_option("--resolutions", resolutions);
-  app.add_option("--threads", threads, "thread counts (each row runs both with the same count)");
+  app.add_option("--meshes", meshes)->delimiter(',');
+  app.add_option("--resolutions", resolutions)->delimiter(',');
+  app.add_option("--threads", threads, "thread counts (each row runs both with the same count)")->delimiter(',');
   app.add_option("--half-width", half_width, "narrow band half-width in voxels (distband --limit-voxels)");
   app.add_option("--reps,-R", reps);
   app.add_option("--distband", distband_bin);
   app.add_option("--peer", peer_bin);
+  app.add_option("--peer-env", peer_env,
+                 "NAME=VALUE added to the peer's environment (e.g. GLIBC_TUNABLES=glibc.malloc.top_pad=67108864, to "
+                 "give it distband's malloc setting)");
   app.add_option("--out-dir", out_dir);
   app.add_option("--tag", tag, "also write <out-dir>/<tag>.md");
   app.add_option("--json", json_path, "write the rows as JSON to this file");
@@ -177,8 +187,8 @@ int main(int argc, char** argv) {
       "Whole process, exec to exit (read mesh, narrow band half-width {} voxels, write .vdb); medians of {} "
       "alternating runs; CPU = user + system of the child (all threads).\n\n"
       "| mesh | res | threads | distband s | OpenVDB s | ratio | distband CPU s | OpenVDB CPU s | CPU ratio | "
-      "distband engine s | distband write s | active voxels distband / OpenVDB | max diff (vox) | sign diff |\n"
-      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+      "distband load+seeds s | distband engine s | distband write s | distband start+exit s | active voxels distband / OpenVDB | max diff (vox) | sign diff |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
       half_width, reps);
   std::fputs(md.c_str(), stdout);
   std::fflush(stdout);
@@ -197,7 +207,7 @@ int main(int argc, char** argv) {
                                                     std::to_string(half_width), "--threads", std::to_string(t),
                                                     "--out",        peer_out};
         // Warm-up (untimed), then the check that both did the same job.
-        const ChildRun w1 = runChild(dist_args, dist_log), w2 = runChild(peer_args, peer_log);
+        const ChildRun w1 = runChild(dist_args, dist_log), w2 = runChild(peer_args, peer_log, peer_env);
         if (w1.status != 0 || w2.status != 0) {
           std::fprintf(stderr, "%s %d^3: a child failed (distband %d, openvdb %d)\n", mesh.c_str(), res, w1.status,
                        w2.status);
@@ -211,7 +221,7 @@ int main(int argc, char** argv) {
           ++failures;
           continue;
         }
-        std::vector<double> dw, dc, pw, pc, engine, write;
+        std::vector<double> dw, dc, pw, pc, engine, write, before_engine, outside_main;
         for (int r = 0; r < reps; ++r) {
           auto runDistband = [&] {
             const ChildRun c = runChild(dist_args, dist_log);
@@ -221,9 +231,12 @@ int main(int argc, char** argv) {
             const std::string log = readText(dist_log);
             engine.push_back(phaseSeconds(log, "engine "));
             write.push_back(phaseSeconds(log, "(write "));
+            const double total = phaseSeconds(log, "total ");  // runCompute's clock: after start-up, before exit
+            before_engine.push_back(total - engine.back() - write.back());
+            outside_main.push_back(c.wall_s - total);
           };
           auto runPeer = [&] {
-            const ChildRun c = runChild(peer_args, peer_log);
+            const ChildRun c = runChild(peer_args, peer_log, peer_env);
             if (c.status != 0) ++failures;
             pw.push_back(c.wall_s);
             pc.push_back(c.cpu_s);
@@ -238,9 +251,10 @@ int main(int argc, char** argv) {
         }
         const double dwm = median(dw), pwm = median(pw), dcm = median(dc), pcm = median(pc);
         const std::string line = fmt::format(
-            "| {} | {}³ | {} | {:.3f} | {:.3f} | **{:.2f}×** | {:.3f} | {:.3f} | {:.2f}× | {:.3f} | {:.3f} | {} / {} | "
-            "{:.3f} | {} |\n",
-            mesh, res, t, dwm, pwm, dwm / pwm, dcm, pcm, dcm / pcm, median(engine), median(write),
+            "| {} | {}³ | {} | {:.3f} | {:.3f} | **{:.2f}×** | {:.3f} | {:.3f} | {:.2f}× | {:.3f} | {:.3f} | {:.3f} | "
+            "{:.3f} | {} / {} | {:.3f} | {} |\n",
+            mesh, res, t, dwm, pwm, dwm / pwm, dcm, pcm, dcm / pcm, median(before_engine), median(engine),
+            median(write), median(outside_main),
             agree.distband_active, agree.openvdb_active, agree.max_diff_vox, agree.sign_disagree);
         md += line;
         std::fputs(line.c_str(), stdout);
@@ -258,6 +272,8 @@ int main(int argc, char** argv) {
                         {"ratio_cpu", dcm / pcm},
                         {"distband_engine_s", median(engine)},
                         {"distband_write_s", median(write)},
+                        {"distband_load_seeds_s", median(before_engine)},
+                        {"distband_startup_exit_s", median(outside_main)},
                         {"distband_wall_times_s", dw},
                         {"openvdb_wall_times_s", pw},
                         {"distband_cpu_times_s", dc},
@@ -273,8 +289,11 @@ int main(int argc, char** argv) {
   char when[64];
   const std::time_t now = std::time(nullptr);
   std::strftime(when, sizeof when, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
-  const std::string footer = fmt::format("\n{}; distband {}; peer {}; {} cores online.\n", when, distband_bin,
-                                         peer_bin, sysconf(_SC_NPROCESSORS_ONLN));
+  std::string env_text;
+  for (const std::string& e : peer_env) env_text += " " + e;
+  const std::string footer = fmt::format("\n{}; distband {}; peer {}{}; {} cores online.\n", when, distband_bin,
+                                         peer_bin, env_text.empty() ? "" : " with" + env_text,
+                                         sysconf(_SC_NPROCESSORS_ONLN));
   md += footer;
   std::fputs(footer.c_str(), stdout);
   if (!tag.empty()) std::ofstream(out_dir + "/" + tag + ".md") << md;
