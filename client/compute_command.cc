@@ -6,8 +6,10 @@
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <optional>
 
 #include <fmt/format.h>
+#include <tbb/global_control.h>
 
 #include "client/brick_sink.h"
 #include "core/engine.h"
@@ -234,6 +236,9 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   if (!(a.segment >= 0) || std::isinf(a.segment))
     return usage(fmt::format("--segment must be finite and >= 0 (got {})", a.segment));
   if (a.threads < 0) return usage(fmt::format("--threads must be >= 0 (got {})", a.threads));
+  // --threads bounds the whole command (mesh validation, seeds, VDB assembly), not only the engine's arena.
+  std::optional<tbb::global_control> parallelism;
+  if (a.threads > 0) parallelism.emplace(tbb::global_control::max_allowed_parallelism, size_t(a.threads));
   field.limit_world = a.limit;
   field.limit_voxels = a.limit_voxels;
   field.segment_length_world = a.segment;

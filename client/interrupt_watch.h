@@ -1,12 +1,14 @@
 // InterruptWatch: bridges a "stop was asked" predicate (the CLI's SIGINT flag, which a signal handler sets and which
 // therefore cannot do more) to core's Interrupter, which the engine and the seed builders poll.
 // Contract: while the watch lives, a thread polls `requested` every 10 ms and cancels interrupter() the first time it
-// returns true. An empty predicate never trips. The destructor stops the thread. Not copyable.
+// returns true. An empty predicate never trips. The destructor wakes and stops the thread at once (it does not wait out
+// a poll period: a finished command exits without that delay). Not copyable.
 #pragma once
 
-#include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <functional>
+#include <mutex>
 #include <thread>
 
 #include "core/interrupter.h"
@@ -18,19 +20,24 @@ class InterruptWatch {
   explicit InterruptWatch(std::function<bool()> requested) : requested_(std::move(requested)) {
     if (requested_)
       thread_ = std::thread([this] {
-        while (!done_.load()) {
+        std::unique_lock<std::mutex> lock(mutex_);
+        while (!done_) {
           if (requested_()) {
             interrupter_.cancel(Status::Code::kCancelled, "interrupted by the user");
             return;
           }
-          std::this_thread::sleep_for(std::chrono::milliseconds(10));
+          wake_.wait_for(lock, std::chrono::milliseconds(10));
         }
       });
   }
   InterruptWatch(const InterruptWatch&) = delete;
   InterruptWatch& operator=(const InterruptWatch&) = delete;
   ~InterruptWatch() {
-    done_.store(true);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      done_ = true;
+    }
+    wake_.notify_all();
     if (thread_.joinable()) thread_.join();
   }
   Interrupter& interrupter() { return interrupter_; }
@@ -38,7 +45,9 @@ class InterruptWatch {
  private:
   std::function<bool()> requested_;
   Interrupter interrupter_;
-  std::atomic<bool> done_{false};
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  bool done_ = false;  // guarded by mutex_
   std::thread thread_;
 };
 
