@@ -10,8 +10,8 @@
 # server's own default listens on loopback only, and --listen may be given only once.
 #
 # The image ships distband-server (the entrypoint) and distband-health (the HEALTHCHECK: grpc.health.v1 Check,
-# exit 0 iff SERVING), not the distband CLI: the CLI writes .vdb level sets and PNG slices, so it loads OpenVDB
-# and libpng (~60 MB of libraries the server does not use). Query a container with the CLI from outside it.
+# exit 0 iff SERVING), not the distband CLI, which writes .vdb level sets and PNG slices (libblosc, libpng: libraries
+# the server does not use). Query a container with the CLI from outside it.
 
 ARG DEBIAN_IMAGE=debian:bookworm-slim
 
@@ -33,7 +33,7 @@ COPY client client
 COPY bench bench
 COPY tests tests
 # --as-needed (Debian's gcc default, explicit for other toolchains): the server and the probe record only the
-# libraries they call, not OpenVDB/libpng that the core library's link interface lists.
+# libraries they call, not libblosc/libpng that the core library's link interface lists.
 RUN cmake -S . -B /build -G Ninja -DCMAKE_BUILD_TYPE=Release -DDISTBAND_BUILD_TESTS=OFF \
           -DCMAKE_EXE_LINKER_FLAGS="-Wl,--as-needed" >/dev/null \
  && cmake --build /build --target distband-server distband-health -j"$(nproc)" \

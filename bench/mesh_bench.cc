@@ -7,8 +7,8 @@
 //     memory) in this process with one TBB thread budget (--threads, via tbb::global_control; the engine also
 //     runs in a task_arena of that size), and writes <out-dir>/<tag>.json and <tag>.md.
 //   * Timed region, distband: makeMeshSeeds + computeDistanceField (sign included). In the openvdb suite the
-//     timed region also assembles the delivered bricks into an OpenVDB FloatGrid (VdbFieldBuilder + signed
-//     flood fill), the same product OpenVDB's call returns; the engine-only time is reported beside it.
+//     timed region also assembles the delivered bricks into a level-set tree of OpenVDB's shape (VdbFieldBuilder + signed
+//     flood fill), the product OpenVDB's call returns; the engine-only time is reported beside it.
 //     Timed region, OpenVDB: meshToSignedDistanceField (float points and indices prepared before the clock).
 //   * Errors are in voxels against brute force (tests/support/brute_mesh: exact point–triangle distance over all
 //     triangles, sign from the exact generalized winding number), on --samples voxels: for table1 drawn
@@ -303,27 +303,29 @@ json openvdbSuite(const Options& o) {
       json row = {{"mesh", in.name}, {"res", o.openvdb_resolution}, {"half_width", hw},
                   {"dims", {grid.dims().x, grid.dims().y, grid.dims().z}}, {"threads", o.threads}};
       // distband exact-feature first: its delivered band gives the sample voxels.
-      std::shared_ptr<void> handle;
+      std::unique_ptr<VdbFieldBuilder> built;
       // The timed product: seeds, engine and the assembled level-set grid.
-      auto runExact = [&](std::shared_ptr<void>* grid_out) {
-        VdbFieldBuilder builder(grid, float(hw * grid.voxelSize()));
+      auto runExact = [&](std::unique_ptr<VdbFieldBuilder>* out) {
+        auto builder = std::make_unique<VdbFieldBuilder>(grid, float(hw * grid.voxelSize()));
         DistbandRun run = runDistband(grid, in, MeshSiteMode::kExactFeature, hw, 0, o, [&](SegmentBricks& s) {
-          builder.add(s);
+          builder->add(s);
         });
         const auto tf = Clock::now();
-        builder.finish();
+        builder->finish();
         run.output_s += since(tf);
         run.total_s += since(tf);
-        if (grid_out) *grid_out = builder.gridHandle();
+        if (out) *out = std::move(builder);
         return run;
       };
-      DistbandRun exact = runExact(&handle);
-      auto dgrid = std::static_pointer_cast<openvdb::FloatGrid>(handle);
+      DistbandRun exact = runExact(&built);
       // Sample voxels uniformly from distband's active band.
       {
+        const VdbTree<float>& tree = built->distance();
         std::vector<Coord> all;
-        all.reserve(dgrid->activeVoxelCount());
-        for (auto it = dgrid->cbeginValueOn(); it; ++it) all.push_back({it.getCoord().x(), it.getCoord().y(), it.getCoord().z()});
+        all.reserve(size_t(tree.activeVoxels()));
+        for (const auto* leaf : tree.leaves())
+          for (int i = 0; i < kBrickVoxels; ++i)
+            if (leaf->mask.test(i)) all.push_back(leaf->origin + brickLocal(i));
         std::mt19937 rng(5);
         std::shuffle(all.begin(), all.end(), rng);
         all.resize(std::min<size_t>(all.size(), o.samples));
@@ -337,9 +339,10 @@ json openvdbSuite(const Options& o) {
           }
           return v;
         };
-        const ErrorStats e_exact = compare(ref, valuesFrom(*dgrid), grid.voxelSize());
-        handle.reset();
-        dgrid.reset();
+        std::vector<float> exact_values(ref.voxels.size());
+        for (size_t i = 0; i < ref.voxels.size(); ++i) exact_values[i] = built->value(ref.voxels[i]);  // all active
+        const ErrorStats e_exact = compare(ref, exact_values, grid.voxelSize());
+        built.reset();
         // distband paper mode on the same band.
         SampleProbe probe(ref.voxels);
         const DistbandRun paper = runDistband(grid, in, MeshSiteMode::kPaper, hw, 0, o,

@@ -39,7 +39,7 @@
 #include <openvdb/openvdb.h>
 
 #include "bench/bench_util.h"
-#include "core/io/vdb_reader.h"
+#include "tests/support/vdb_reader.h"
 
 #ifndef DISTBAND_BENCH_DIR
 #define DISTBAND_BENCH_DIR "bench"

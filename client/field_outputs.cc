@@ -6,7 +6,6 @@
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
-#include <openvdb/openvdb.h>
 
 #include "core/io/field_metadata.h"
 #include "core/io/isosurface.h"
@@ -195,18 +194,15 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
     report(e, "wrote " + npy_->description());
   }
   if (vdb_) {
+    vdb_->setRunState(run.complete, segments_);
     vdb_->finish();
-    auto grid = std::static_pointer_cast<openvdb::FloatGrid>(vdb_->gridHandle());
-    grid->insertMeta("distband_complete", openvdb::BoolMetadata(run.complete));
-    grid->insertMeta("distband_segments", openvdb::Int32Metadata(segments_));
     if (endsWith(f.out, ".vdb"))
       report(vdb_->write(f.out),
              fmt::format("wrote {} (OpenVDB level set \"distance\", {} active voxels{})", f.out, vdb_->activeVoxels(),
                          f.closest == f.out ? fmt::format(", and grid \"closest\" of {} ids", field_.closest_feature)
                                             : std::string()));
     if (!f.slice_png.empty()) {
-      auto acc = grid->getConstAccessor();
-      const VoxelSampler sample = [&](const Coord& c) { return acc.getValue(openvdb::Coord(c.x, c.y, c.z)); };
+      const VoxelSampler sample = [&](const Coord& c) { return vdb_->value(c); };
       SlicePngOptions so;
       so.limit_world = field_.limit_world;
       so.sign = field_.signed_distance ? SliceSign::kSigned : SliceSign::kUnsigned;
@@ -218,7 +214,7 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
       TriangleMeshF mesh;
       IsosurfaceOptions io;
       io.distance_world = plan_.isosurface;
-      const std::string e = writeIsosurfaceObj(f.isosurface[1], *grid, io, &mesh);
+      const std::string e = writeIsosurfaceObj(f.isosurface[1], vdb_->distance(), vdb_->grid(), io, &mesh);
       report(e, fmt::format("wrote {} (isosurface at {:g}: {} vertices, {} triangles)", f.isosurface[1],
                             plan_.isosurface, mesh.vertices.size(), mesh.triangles.size()));
     }

@@ -1,6 +1,6 @@
 // distband-health: the container image's HEALTHCHECK. The same grpc.health.v1 check as `distband health`
 // (RemoteClient::health, exit 0 iff SERVING, the status name on stdout), built without the CLI's output writers,
-// so it links no OpenVDB or libpng and the runtime image can leave those libraries out. Takes the CLI's connection
+// so it links no libblosc or libpng and the runtime image can leave those libraries out. Takes the CLI's connection
 // flags (--tls, --tls-ca, client certificates), so it can probe a server that serves TLS.
 #include <chrono>
 #include <cstdio>

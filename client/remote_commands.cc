@@ -9,7 +9,6 @@
 #include <thread>
 
 #include <fmt/format.h>
-#include <openvdb/openvdb.h>
 
 #include "client/brick_sink.h"
 #include "client/compute_command.h"

@@ -1,16 +1,22 @@
-// Isosurface: the surface at signed distance D of an OpenVDB level set, as a triangle mesh and as a Wavefront OBJ.
+// Isosurface: the surface at signed distance D of a level set (core/io/vdb_tree.h), as a triangle mesh and as a
+// Wavefront OBJ.
 // Contract:
-//   * extractIsosurface() runs openvdb::tools::volumeToMesh on `grid` at isovalue D (world units, negative
-//     inside) and splits every quad into two triangles. Vertices are in world coordinates (the grid's
-//     transform). Triangles are wound counter-clockwise seen from outside (the side where the field is larger),
-//     the OBJ / OpenGL convention, so normals point away from the inside.
-//   * D must be finite and |D| below the grid's background (the field's limit): beyond it the level set holds
-//     no surface, and asking for one is reported as an error, not as an empty mesh. A D inside the limit that
-//     meets no voxels gives an empty mesh (and an OBJ with no faces).
+//   * extractIsosurface() meshes the cells (cubes of 8 neighbouring voxels) whose values straddle D and that touch
+//     a leaf of the tree, by surface nets: one vertex per such cell, at the mean of the points where its 12 edges cross
+//     D (linear interpolation of the two voxel values), and one quad per lattice edge that crosses D, joining the
+//     vertices of the 4 cells around that edge, split into two triangles along its shorter diagonal. So the mesh is
+//     closed wherever the band is (each crossing edge is shared by exactly the four cells that use it), vertices lie
+//     within their cells, and the work follows the band's leaves. Vertices are in world coordinates (origin +
+//     voxel size × index, core/grid.h). Triangles are wound counter-clockwise seen from outside (the side where the
+//     field is larger), the OBJ / OpenGL convention, so normals point away from the inside. Output is deterministic
+//     (leaf order, then cell order), whatever the thread count.
+//   * D must be finite and |D| below the tree's background (the field's limit): beyond it the level set holds no
+//     surface, and asking for one is reported as an error, not as an empty mesh. A D inside the limit that meets no
+//     voxels gives an empty mesh (and an OBJ with no faces). The tree must be sealed (and flood-filled).
 //   * writeIsosurfaceObj() writes "v x y z" lines then 1-based "f a b c" lines, through a temporary file in
 //     the target's directory renamed over `path`, so an interrupted run never leaves a partial OBJ.
 //   * Errors come back as a non-empty message; nothing is thrown for bad input or I/O.
-// Thread-safety: re-entrant; `grid` is only read (volumeToMesh itself runs multi-threaded on TBB).
+// Thread-safety: re-entrant; the tree is only read (cells are meshed in parallel on the caller's TBB arena).
 #pragma once
 
 #include <array>
@@ -18,7 +24,8 @@
 #include <string>
 #include <vector>
 
-#include <openvdb/openvdb.h>
+#include "core/grid.h"
+#include "core/io/vdb_tree.h"
 
 namespace distband {
 
@@ -28,20 +35,20 @@ struct TriangleMeshF {
 };
 
 struct IsosurfaceOptions {
-  double distance_world = 0;  ///< the isovalue D
-  /// volumeToMesh adaptivity in [0, 1]: 0 keeps every voxel's polygon, larger merges flat regions.
-  double adaptivity = 0;
+  double distance_world = 0;          ///< the isovalue D
+  std::string field_name = "distance";  ///< named in the OBJ's header
 };
 
-/// Extracts the isosurface. Returns "" on success (mesh filled), otherwise why not (mesh cleared).
-std::string extractIsosurface(const openvdb::FloatGrid& grid, const IsosurfaceOptions& options,
+/// Extracts the isosurface of `field`, whose index space is `grid`'s. Returns "" on success (mesh filled),
+/// otherwise why not (mesh cleared).
+std::string extractIsosurface(const VdbTree<float>& field, const Grid& grid, const IsosurfaceOptions& options,
                               TriangleMeshF* mesh);
 
 /// Writes `mesh` as OBJ to `path` (temp file + rename). `comment` (optional) becomes "# ..." header lines.
 std::string writeObj(const std::string& path, const TriangleMeshF& mesh, const std::string& comment = {});
 
 /// extractIsosurface + writeObj. On success `mesh_out` (optional) receives the mesh written.
-std::string writeIsosurfaceObj(const std::string& path, const openvdb::FloatGrid& grid,
+std::string writeIsosurfaceObj(const std::string& path, const VdbTree<float>& field, const Grid& grid,
                                const IsosurfaceOptions& options, TriangleMeshF* mesh_out = nullptr);
 
 }  // namespace distband

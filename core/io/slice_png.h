@@ -29,8 +29,8 @@
 //   * Errors (bad axis or index, bad options, I/O) come back as a non-empty message; nothing is thrown for them.
 //   * Limited fields: a DenseField holds +background everywhere not delivered, so its inside beyond the limit
 //     shows as outside (the contour check above keeps that seam out of the contour). A VdbFieldBuilder grid after
-//     finish() (signed flood fill) reads -background there; sample it through an accessor, e.g.
-//     [&acc](const Coord& c) { return acc.getValue(openvdb::Coord(c.x, c.y, c.z)); }, for correct inside colours.
+//     finish() (signed flood fill) reads -background there; sample it with
+//     [&builder](const Coord& c) { return builder.value(c); }, for correct inside colours.
 // Thread-safety: the functions are re-entrant; the sampler is called from the calling thread only.
 #pragma once
 

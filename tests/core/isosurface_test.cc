@@ -1,5 +1,6 @@
-// Tests for core/io/isosurface: isosurfaces of an OpenVDB sphere level set at distances 0 and 2 — vertex radii,
-// orientation (outward), closedness, and the OBJ file parsed back; invalid distances are errors.
+// Tests for core/io/isosurface: isosurfaces of an exact sphere level set (a VdbFieldBuilder of its bricks) at
+// distances 0 and 2 — vertex radii, orientation (outward), closedness, the same mesh at any thread count, and the OBJ
+// file parsed back; invalid distances are errors.
 #include "core/io/isosurface.h"
 
 #include <unistd.h>
@@ -15,8 +16,12 @@
 #include <string>
 #include <utility>
 
+#include <memory>
+
 #include <gtest/gtest.h>
-#include <openvdb/tools/LevelSetSphere.h>
+#include <tbb/global_control.h>
+
+#include "core/io/vdb_writer.h"
 
 namespace distband {
 namespace {
@@ -25,11 +30,34 @@ namespace fs = std::filesystem;
 
 constexpr float kRadius = 10.f;
 constexpr float kVoxel = 0.25f;
-const openvdb::Vec3f kCentre(1.f, -2.f, 3.f);
+struct Centre {
+  float x() const { return 1.f; }
+  float y() const { return -2.f; }
+  float z() const { return 3.f; }
+} const kCentre;
 
-openvdb::FloatGrid::Ptr makeSphere() {
-  // Half width 12 voxels = 3 world units: the band holds the surfaces at distance 0 and 2.
-  return openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(kRadius, kCentre, kVoxel, 12.f);
+// The exact signed distance to the sphere, delivered within half width 12 voxels = 3 world units (so the band holds
+// the surfaces at distance 0 and 2), flood-filled.
+std::unique_ptr<VdbFieldBuilder> makeSphere() {
+  const Grid grid({kCentre.x() - 14.0, kCentre.y() - 14.0, kCentre.z() - 14.0}, kVoxel, {120, 120, 120});
+  auto builder = std::make_unique<VdbFieldBuilder>(grid, 3.f);
+  for (int bz = 0; bz < 120; bz += 8)
+    for (int by = 0; by < 120; by += 8)
+      for (int bx = 0; bx < 120; bx += 8) {
+        Brick b;
+        b.origin = {bx, by, bz};
+        for (int i = 0; i < kBrickVoxels; ++i) {
+          const Vec3d w = grid.worldOf(b.origin + brickLocal(i));
+          const double d = std::sqrt((w.x - kCentre.x()) * (w.x - kCentre.x()) + (w.y - kCentre.y()) * (w.y - kCentre.y()) +
+                                     (w.z - kCentre.z()) * (w.z - kCentre.z())) - kRadius;
+          if (std::abs(d) >= 3.0) continue;
+          b.mask.set(i);
+          b.values[size_t(i)] = float(d);
+        }
+        builder->add(b);
+      }
+  builder->finish();
+  return builder;
 }
 
 double signedVolume(const TriangleMeshF& mesh) {
@@ -63,7 +91,6 @@ bool closedAndConsistent(const TriangleMeshF& mesh) {
 class IsosurfaceTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    openvdb::initialize();
     dir_ = fs::temp_directory_path() / ("distband_isosurface_" + std::to_string(::getpid()) + "_" +
                                         ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::create_directories(dir_);
@@ -73,12 +100,12 @@ class IsosurfaceTest : public ::testing::Test {
 };
 
 TEST_F(IsosurfaceTest, SphereSurfacesAtDistanceZeroAndTwo) {
-  const openvdb::FloatGrid::Ptr grid = makeSphere();
-  ASSERT_NEAR(grid->background(), 3.f, 1e-6);
+  const auto sphere = makeSphere();
+  ASSERT_NEAR(sphere->distance().background(), 3.f, 1e-6);
   for (const double d : {0.0, 2.0}) {
     SCOPED_TRACE(testing::Message() << "distance " << d);
     TriangleMeshF mesh;
-    ASSERT_EQ(extractIsosurface(*grid, {d, 0.0}, &mesh), "");
+    ASSERT_EQ(extractIsosurface(sphere->distance(), sphere->grid(), {d}, &mesh), "");
     ASSERT_GT(mesh.triangles.size(), 1000u);
     const double r = kRadius + d;
     double max_err = 0;
@@ -100,12 +127,29 @@ TEST_F(IsosurfaceTest, SphereSurfacesAtDistanceZeroAndTwo) {
   }
 }
 
+TEST_F(IsosurfaceTest, TheMeshIsTheSameAtAnyThreadCount) {
+  const auto sphere = makeSphere();
+  TriangleMeshF one, two;
+  {
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 1);
+    ASSERT_EQ(extractIsosurface(sphere->distance(), sphere->grid(), {0.5}, &one), "");
+  }
+  {
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 2);
+    ASSERT_EQ(extractIsosurface(sphere->distance(), sphere->grid(), {0.5}, &two), "");
+  }
+  EXPECT_EQ(one.vertices, two.vertices);
+  EXPECT_EQ(one.triangles, two.triangles);
+}
+
 TEST_F(IsosurfaceTest, ObjFileParsesBackToTheMesh) {
-  const openvdb::FloatGrid::Ptr grid = makeSphere();
-  grid->setName("sphere");
+  const auto sphere = makeSphere();
   const std::string path = (dir_ / "sphere_2.obj").string();
   TriangleMeshF mesh;
-  ASSERT_EQ(writeIsosurfaceObj(path, *grid, {2.0, 0.0}, &mesh), "");
+  IsosurfaceOptions options;
+  options.distance_world = 2.0;
+  options.field_name = "sphere";
+  ASSERT_EQ(writeIsosurfaceObj(path, sphere->distance(), sphere->grid(), options, &mesh), "");
   // Only the OBJ is left: the temporary file was renamed.
   EXPECT_EQ(std::distance(fs::directory_iterator(dir_), fs::directory_iterator()), 1);
 
@@ -151,42 +195,43 @@ TEST_F(IsosurfaceTest, ObjFileParsesBackToTheMesh) {
   EXPECT_TRUE(header_names_grid);
 }
 
-TEST_F(IsosurfaceTest, AdaptivityReducesTrianglesAndKeepsTheSurface) {
-  const openvdb::FloatGrid::Ptr grid = makeSphere();
-  TriangleMeshF full, adaptive;
-  ASSERT_EQ(extractIsosurface(*grid, {0.0, 0.0}, &full), "");
-  ASSERT_EQ(extractIsosurface(*grid, {0.0, 0.5}, &adaptive), "");
-  EXPECT_LT(adaptive.triangles.size(), full.triangles.size());
-  EXPECT_GT(signedVolume(adaptive), 0.95 * 4.0 / 3.0 * M_PI * kRadius * kRadius * kRadius);
-}
-
 TEST_F(IsosurfaceTest, InvalidDistancesAreErrors) {
-  const openvdb::FloatGrid::Ptr grid = makeSphere();
+  const auto sphere = makeSphere();
+  const VdbTree<float>& field = sphere->distance();
+  const Grid& grid = sphere->grid();
   TriangleMeshF mesh;
   mesh.vertices.push_back({1, 2, 3});
-  std::string err = extractIsosurface(*grid, {3.0, 0.0}, &mesh);
+  std::string err = extractIsosurface(field, grid, {3.0}, &mesh);
   EXPECT_NE(err.find("not inside the field's limit"), std::string::npos) << err;
   EXPECT_TRUE(mesh.vertices.empty());
-  EXPECT_FALSE(extractIsosurface(*grid, {-3.5, 0.0}, &mesh).empty());
-  err = extractIsosurface(*grid, {std::numeric_limits<double>::quiet_NaN(), 0.0}, &mesh);
+  EXPECT_FALSE(extractIsosurface(field, grid, {-3.5}, &mesh).empty());
+  err = extractIsosurface(field, grid, {std::numeric_limits<double>::quiet_NaN()}, &mesh);
   EXPECT_NE(err.find("finite"), std::string::npos) << err;
-  err = extractIsosurface(*grid, {0.0, 1.5}, &mesh);
-  EXPECT_NE(err.find("adaptivity"), std::string::npos) << err;
   const std::string path = (dir_ / "never.obj").string();
-  EXPECT_FALSE(writeIsosurfaceObj(path, *grid, {5.0, 0.0}).empty());
+  EXPECT_FALSE(writeIsosurfaceObj(path, field, grid, {5.0}).empty());
   EXPECT_FALSE(fs::exists(path));
+  // An unfinished field is refused, not read half-built.
+  VdbFieldBuilder unfinished(grid, 3.f);
+  err = extractIsosurface(unfinished.distance(), grid, {0.0}, &mesh);
+  EXPECT_NE(err.find("not finished"), std::string::npos) << err;
   // An unwritable destination is reported.
-  err = writeIsosurfaceObj((dir_ / "missing" / "x.obj").string(), *grid, {0.0, 0.0});
+  err = writeIsosurfaceObj((dir_ / "missing" / "x.obj").string(), field, grid, {0.0});
   EXPECT_NE(err.find("temporary file"), std::string::npos) << err;
 }
 
 TEST_F(IsosurfaceTest, ADistanceThatMeetsNoVoxelsGivesAnEmptyMesh) {
   // A grid whose values are all positive (a surface seen only from outside the band) has no surface at 0.
-  openvdb::FloatGrid grid(/*background=*/2.f);
-  grid.tree().setValue(openvdb::Coord(0, 0, 0), 1.f);
-  grid.tree().setValue(openvdb::Coord(1, 0, 0), 1.5f);
+  const Grid grid({0, 0, 0}, 1.0, {8, 8, 8});
+  VdbFieldBuilder field(grid, 2.f);
+  Brick b;
+  b.mask.set(brickOffset(0, 0, 0));
+  b.values[size_t(brickOffset(0, 0, 0))] = 1.f;
+  b.mask.set(brickOffset(1, 0, 0));
+  b.values[size_t(brickOffset(1, 0, 0))] = 1.5f;
+  field.add(b);
+  field.finish();
   TriangleMeshF mesh;
-  ASSERT_EQ(extractIsosurface(grid, {0.0, 0.0}, &mesh), "");
+  ASSERT_EQ(extractIsosurface(field.distance(), grid, {0.0}, &mesh), "");
   EXPECT_TRUE(mesh.vertices.empty());
   EXPECT_TRUE(mesh.triangles.empty());
   const std::string path = (dir_ / "empty.obj").string();

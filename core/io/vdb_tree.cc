@@ -1,0 +1,274 @@
+#include "core/io/vdb_tree.h"
+
+#include <algorithm>
+#include <bit>
+#include <tuple>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
+
+namespace distband {
+namespace {
+
+constexpr size_t kSlabLeaves = 256;
+
+Coord alignDown(const Coord& c, int dim) { return {c.x & ~(dim - 1), c.y & ~(dim - 1), c.z & ~(dim - 1)}; }
+bool lexLess(const Coord& a, const Coord& b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); }
+// Table offsets, x-major as in OpenVDB's nodes.
+int offset2(const Coord& c) {
+  return (((c.x & 4095) >> 7) << 10) | (((c.y & 4095) >> 7) << 5) | ((c.z & 4095) >> 7);
+}
+int offset1(const Coord& c) { return (((c.x & 127) >> 3) << 8) | (((c.y & 127) >> 3) << 4) | ((c.z & 127) >> 3); }
+
+template <size_t kWords>
+void setBit(std::array<uint64_t, kWords>& words, int i) {
+  words[size_t(i) >> 6] |= uint64_t(1) << (i & 63);
+}
+
+template <size_t kWords>
+void computeRank(const std::array<uint64_t, kWords>& child, std::array<uint32_t, kWords>& rank) {
+  uint32_t n = 0;
+  for (size_t w = 0; w < kWords; ++w) {
+    rank[w] = n;
+    n += uint32_t(std::popcount(child[w]));
+  }
+}
+
+// OpenVDB's signed flood fill of one internal node's tiles: a z-scanline walk over the table in x-major order, each
+// tile taking the sign of the last child value met before it (children's last values at scanline starts).
+template <int kLog2, class TableT, class FirstOf, class LastOf>
+void fillTable(TableT& t, FirstOf firstOf, LastOf lastOf) {
+  constexpr int kDim = 1 << kLog2;
+  int first = -1;
+  for (size_t w = 0; w < t.child.size() && first < 0; ++w)
+    if (t.child[w]) first = int(w * 64) + std::countr_zero(t.child[w]);
+  if (first < 0) return;  // nodes exist only with children
+  t.negative.fill(0);
+  bool x_inside = firstOf(first) < 0;
+  for (int x = 0; x < kDim; ++x) {
+    const int x00 = x << (2 * kLog2);
+    if (t.isChild(x00)) x_inside = lastOf(x00) < 0;
+    bool y_inside = x_inside;
+    for (int y = 0; y < kDim; ++y) {
+      const int xy0 = x00 + (y << kLog2);
+      if (t.isChild(xy0)) y_inside = lastOf(xy0) < 0;
+      bool z_inside = y_inside;
+      for (int z = 0; z < kDim; ++z) {
+        const int xyz = xy0 + z;
+        if (t.isChild(xyz)) z_inside = lastOf(xyz) < 0;
+        else if (z_inside) setBit(t.negative, xyz);
+      }
+    }
+  }
+}
+
+}  // namespace
+
+template <class T>
+template <int kWords>
+uint32_t VdbTree<T>::Table<kWords>::childIndex(int i) const {
+  const size_t w = size_t(i) >> 6;
+  return first + rank[w] + uint32_t(std::popcount(child[w] & ((uint64_t(1) << (i & 63)) - 1)));
+}
+
+template <class T>
+VdbTree<T>::VdbTree(T background) : background_(background) {}
+
+template <class T>
+VdbTree<T>::~VdbTree() = default;
+
+template <class T>
+typename VdbTree<T>::Leaf* VdbTree<T>::touchLeaf(const Coord& origin) {
+  auto [it, inserted] = index_.try_emplace(origin, nullptr);
+  if (!inserted) return it->second;
+  if (slabs_.empty() || slab_used_ == kSlabLeaves) {
+    slabs_.emplace_back(new Leaf[kSlabLeaves]);  // values left unset: written below, the slab's pages on first use
+    slab_used_ = 0;
+  }
+  Leaf* leaf = &slabs_.back()[slab_used_++];
+  leaf->origin = origin;
+  leaf->values.fill(background_);
+  leaves_.push_back(leaf);
+  it->second = leaf;
+  return leaf;
+}
+
+template <class T>
+void VdbTree<T>::seal() {
+  if (sealed_) return;
+  sealed_ = true;
+  std::unordered_map<Coord, Leaf*, CoordHash>().swap(index_);
+  // Tree order: root children by origin, then the 4096³ node's table offset, then the 128³ node's.
+  struct Keyed {
+    Coord node2;
+    uint32_t offsets;
+    Leaf* leaf;
+  };
+  std::vector<Keyed> keyed(leaves_.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves_.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const Coord o = leaves_[i]->origin;
+      keyed[i] = {alignDown(o, kNode2Dim), uint32_t(offset2(o)) << 12 | uint32_t(offset1(o)), leaves_[i]};
+    }
+  });
+  tbb::parallel_sort(keyed.begin(), keyed.end(), [](const Keyed& a, const Keyed& b) {
+    return std::tie(a.node2.x, a.node2.y, a.node2.z, a.offsets) < std::tie(b.node2.x, b.node2.y, b.node2.z, b.offsets);
+  });
+  for (size_t i = 0; i < keyed.size(); ++i) {
+    const Keyed& k = keyed[i];
+    leaves_[i] = k.leaf;
+    const Coord o1 = alignDown(k.leaf->origin, kNode1Dim);
+    if (nodes2_.empty() || !(nodes2_.back().origin == k.node2)) {
+      nodes2_.emplace_back();
+      nodes2_.back().origin = k.node2;
+      nodes2_.back().first = uint32_t(nodes1_.size());
+    }
+    if (nodes1_.empty() || !(nodes1_.back().origin == o1)) {
+      nodes1_.emplace_back();
+      nodes1_.back().origin = o1;
+      nodes1_.back().first = uint32_t(i);
+      setBit(nodes2_.back().child, offset2(o1));
+    }
+    setBit(nodes1_.back().child, offset1(k.leaf->origin));
+  }
+  for (Node1& n : nodes1_) computeRank(n.child, n.rank);
+  for (Node2& n : nodes2_) computeRank(n.child, n.rank);
+}
+
+template <class T>
+T VdbTree<T>::firstValue1(const Node1& n) const {
+  return n.isChild(0) ? leaves_[n.childIndex(0)]->values[0] : tileValue(n.isNegative(0));
+}
+template <class T>
+T VdbTree<T>::lastValue1(const Node1& n) const {
+  constexpr int kLast = kNode1Size - 1;
+  return n.isChild(kLast) ? leaves_[n.childIndex(kLast)]->values[kBrickVoxels - 1] : tileValue(n.isNegative(kLast));
+}
+template <class T>
+T VdbTree<T>::firstValue2(const Node2& n) const {
+  return n.isChild(0) ? firstValue1(nodes1_[n.childIndex(0)]) : tileValue(n.isNegative(0));
+}
+template <class T>
+T VdbTree<T>::lastValue2(const Node2& n) const {
+  constexpr int kLast = kNode2Size - 1;
+  return n.isChild(kLast) ? lastValue1(nodes1_[n.childIndex(kLast)]) : tileValue(n.isNegative(kLast));
+}
+
+template <class T>
+void VdbTree<T>::signedFloodFill() {
+  seal();
+  const T outside = background_ < 0 ? T(-background_) : background_, inside = T(-outside);
+  // Bottom-up, as OpenVDB's NodeManager does it: leaves, then 128³ nodes, then 4096³ nodes, then the root.
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves_.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      Leaf& leaf = *leaves_[i];
+      int first = -1;
+      for (size_t w = 0; w < leaf.mask.words.size() && first < 0; ++w)
+        if (leaf.mask.words[w]) first = int(w * 64) + std::countr_zero(leaf.mask.words[w]);
+      if (first < 0) {
+        leaf.values.fill(leaf.values[0] < 0 ? inside : outside);
+        continue;
+      }
+      T* v = leaf.values.data();
+      bool x_inside = v[first] < 0;
+      for (int x = 0; x < 8; ++x) {
+        const int x00 = x << 6;
+        if (leaf.mask.test(x00)) x_inside = v[x00] < 0;
+        bool y_inside = x_inside;
+        for (int y = 0; y < 8; ++y) {
+          const int xy0 = x00 + (y << 3);
+          if (leaf.mask.test(xy0)) y_inside = v[xy0] < 0;
+          bool z_inside = y_inside;
+          for (int z = 0; z < 8; ++z) {
+            const int xyz = xy0 + z;
+            if (leaf.mask.test(xyz)) z_inside = v[xyz] < 0;
+            else v[xyz] = z_inside ? inside : outside;
+          }
+        }
+      }
+    }
+  });
+  // Tiles are read as +/-background through tileValue(): the flood fill's values, with the outside one positive.
+  background_ = outside;
+  tbb::parallel_for(size_t(0), nodes1_.size(), [&](size_t i) {
+    Node1& n = nodes1_[i];
+    fillTable<kNode1Log2>(
+        n, [&](int e) { return leaves_[n.childIndex(e)]->values[0]; },
+        [&](int e) { return leaves_[n.childIndex(e)]->values[kBrickVoxels - 1]; });
+  });
+  tbb::parallel_for(size_t(0), nodes2_.size(), [&](size_t i) {
+    Node2& n = nodes2_[i];
+    fillTable<kNode2Log2>(
+        n, [&](int e) { return firstValue1(nodes1_[n.childIndex(e)]); },
+        [&](int e) { return lastValue1(nodes1_[n.childIndex(e)]); });
+  });
+  // Root: inside tiles fill the gaps of a z-run of children whose facing values are both inside.
+  root_tiles_.clear();
+  for (size_t i = 0; i + 1 < nodes2_.size(); ++i) {
+    const Node2 &a = nodes2_[i], &b = nodes2_[i + 1];
+    if (a.origin.x != b.origin.x || a.origin.y != b.origin.y || b.origin.z - a.origin.z == kNode2Dim) continue;
+    if (!(lastValue2(a) < 0) || !(firstValue2(b) < 0)) continue;
+    for (int z = a.origin.z + kNode2Dim; z != b.origin.z; z += kNode2Dim) root_tiles_.push_back({{a.origin.x, a.origin.y, z}, true});
+  }
+}
+
+template <class T>
+const typename VdbTree<T>::Node2* VdbTree<T>::findNode2(const Coord& origin) const {
+  auto it = std::lower_bound(nodes2_.begin(), nodes2_.end(), origin,
+                             [](const Node2& n, const Coord& o) { return lexLess(n.origin, o); });
+  return it != nodes2_.end() && it->origin == origin ? &*it : nullptr;
+}
+
+template <class T>
+T VdbTree<T>::value(const Coord& c) const {
+  const Coord o2 = alignDown(c, kNode2Dim);
+  const Node2* n2 = findNode2(o2);
+  if (!n2) {
+    auto it = std::lower_bound(root_tiles_.begin(), root_tiles_.end(), o2,
+                               [](const RootTile& t, const Coord& o) { return lexLess(t.origin, o); });
+    return it != root_tiles_.end() && it->origin == o2 ? tileValue(it->negative) : background_;
+  }
+  const int e2 = offset2(c);
+  if (!n2->isChild(e2)) return tileValue(n2->isNegative(e2));
+  const Node1& n1 = nodes1_[n2->childIndex(e2)];
+  const int e1 = offset1(c);
+  if (!n1.isChild(e1)) return tileValue(n1.isNegative(e1));
+  return leaves_[n1.childIndex(e1)]->values[size_t(brickOffset(c.x & 7, c.y & 7, c.z & 7))];
+}
+
+template <class T>
+int64_t VdbTree<T>::leafIndex(const Coord& c) const {
+  const Node2* n2 = findNode2(alignDown(c, kNode2Dim));
+  if (!n2 || !n2->isChild(offset2(c))) return -1;
+  const Node1& n1 = nodes1_[n2->childIndex(offset2(c))];
+  return n1.isChild(offset1(c)) ? int64_t(n1.childIndex(offset1(c))) : -1;
+}
+
+template <class T>
+int64_t VdbTree<T>::activeVoxels() const {
+  int64_t n = 0;
+  for (const Leaf* l : leaves_) n += l->mask.count();
+  return n;
+}
+
+template <class T>
+bool VdbTree<T>::activeBounds(Coord* min, Coord* max) const {
+  bool any = false;
+  for (const Leaf* l : leaves_)
+    for (size_t w = 0; w < l->mask.words.size(); ++w)
+      for (uint64_t bits = l->mask.words[w]; bits; bits &= bits - 1) {
+        const Coord c = l->origin + brickLocal(int(w * 64) + std::countr_zero(bits));
+        if (!any) *min = *max = c, any = true;
+        min->x = std::min(min->x, c.x), min->y = std::min(min->y, c.y), min->z = std::min(min->z, c.z);
+        max->x = std::max(max->x, c.x), max->y = std::max(max->y, c.y), max->z = std::max(max->z, c.z);
+      }
+  return any;
+}
+
+template class VdbTree<float>;
+template class VdbTree<int32_t>;
+template class VdbTree<int64_t>;
+
+}  // namespace distband
