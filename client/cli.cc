@@ -25,6 +25,20 @@ std::vector<CliCommand> registerAllCommands(CLI::App& app, const CliContext& con
   commands.push_back(registerComputeCommand(app, context));
 #ifdef DISTBAND_WITH_SERVICE
   for (CliCommand& c : registerRemoteCommands(app, context)) commands.push_back(std::move(c));
+#else
+  // Without the service compiled in (the front `distband` binary, or a build without gRPC), the remote commands are
+  // listed for --help; the front binary never gets here with them (it hands them to distband-remote first).
+  for (const RemoteCommandName& r : kRemoteCommands) {
+    CLI::App* cmd = app.add_subcommand(r.name, r.description);
+    cmd->allow_extras();
+    cmd->prefix_command();
+    cmd->set_help_flag();
+    commands.push_back({cmd, [&context, name = std::string(r.name)] {
+                          context.err << "distband " << name << ": this distband has no service client (built with "
+                                      << "DISTBAND_BUILD_SERVICE=OFF, or distband-remote is missing beside it)\n";
+                          return kExitUsage;
+                        }});
+  }
 #endif
   return commands;
 }

@@ -19,6 +19,19 @@ inline constexpr int kExitFailure = 1;
 inline constexpr int kExitUsage = 2;
 inline constexpr int kExitInterrupted = 130;
 
+/// The service's subcommands (client/remote_commands.h), named here too so a `distband` built without them (the
+/// front binary, which hands them to `distband-remote`) lists them in its help with the same words.
+struct RemoteCommandName {
+  const char* name;
+  const char* description;
+};
+inline constexpr RemoteCommandName kRemoteCommands[] = {
+    {"query", "Compute a distance field on a distband server and write it"},
+    {"upload", "Upload a mesh or seed volume to a distband server's cache"},
+    {"info", "Show a distband server's version, limits and options"},
+    {"health", "grpc.health.v1 check of a distband server (exit 0 iff SERVING)"},
+};
+
 struct CliCommand {
   CLI::App* app = nullptr;    ///< the subcommand
   std::function<int()> run;   ///< runs it with the parsed options; returns the exit code

@@ -1,13 +1,49 @@
-// distband: the command-line entry point. All logic lives in distband_cli_lib (client/cli.h) so tests can run it.
+// distband: the command-line entry point. All logic lives in the CLI libraries (client/cli.h) so tests can run it.
+// Two binaries are built from this file:
+//   * `distband`, the front binary: compute in-process, without the gRPC stack. Dynamic linking of gRPC, protobuf,
+//     abseil and OpenSSL (~50 libraries) cost every `distband compute` ~10 ms before main; so the service
+//     subcommands (query, upload, info, health) are run by handing the whole command line, unchanged, to
+//     `distband-remote` in the same directory (execv, as git runs its git-<command> helpers).
+//   * `distband-remote` (DISTBAND_FULL_CLI): every subcommand, the service's included.
 #include <malloc.h>
+#include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
 #include <iostream>
 #include <string>
 #include <vector>
 
 #include "client/cli.h"
 
+namespace {
+
+#if !defined(DISTBAND_FULL_CLI) && defined(DISTBAND_REMOTE_HELPER)
+// Runs distband-remote with this process's arguments; returns only when that is impossible.
+int runRemoteHelper(char** argv) {
+  std::error_code ec;
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  const std::filesystem::path helper = (ec ? std::filesystem::path(argv[0]) : self).parent_path() / DISTBAND_REMOTE_HELPER;
+  ::execv(helper.c_str(), argv);
+  std::cerr << "distband " << argv[1] << ": cannot run " << helper.string() << " (the service client, installed beside "
+            << "distband): " << std::strerror(errno) << "\n";
+  return distband::kExitFailure;
+}
+
+bool isRemoteCommand(const char* arg) {
+  for (const distband::RemoteCommandName& r : distband::kRemoteCommands)
+    if (std::strcmp(arg, r.name) == 0) return true;
+  return false;
+}
+#endif
+
+}  // namespace
+
 int main(int argc, char** argv) {
+#if !defined(DISTBAND_FULL_CLI) && defined(DISTBAND_REMOTE_HELPER)
+  if (argc > 1 && isRemoteCommand(argv[1])) return runRemoteHelper(argv);
+#endif
   // Grow malloc's heaps 64 MiB at a time and keep that much free at their tops: a command allocates and frees its
   // mesh, seeds and bricks in quick succession, and with glibc's default (grow and trim to the byte) each round
   // faults its pages in afresh. Untouched padding costs address space, not memory (peak RSS: unchanged at

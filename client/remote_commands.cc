@@ -385,7 +385,7 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
 
 CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
   auto args = std::make_shared<QueryArgs>();
-  CLI::App* cmd = app.add_subcommand("query", "Compute a distance field on a distband server and write it");
+  CLI::App* cmd = app.add_subcommand(kRemoteCommands[0].name, kRemoteCommands[0].description);
   addConnectionFlags(cmd, &args->connection);
   cmd->add_option("--mesh", args->mesh, "Seed mesh (.obj .off .ply .stl), uploaded first");
   cmd->add_option("--points", args->points, "Seed points in world coordinates: \"x,y,z;x,y,z\"");
@@ -423,7 +423,7 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
     std::string mesh, volume;
   };
   auto args = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("upload", "Upload a mesh or seed volume to a distband server's cache");
+  CLI::App* cmd = app.add_subcommand(kRemoteCommands[1].name, kRemoteCommands[1].description);
   addConnectionFlags(cmd, &args->connection);
   cmd->add_option("--mesh", args->mesh, "Mesh file (.obj .off .ply .stl)");
   cmd->add_option("--volume", args->volume, "Seed mask .npy (uint8/bool, shape (Z, Y, X))");
@@ -464,7 +464,7 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
 
 CliCommand registerInfo(CLI::App& app, const CliContext& ctx) {
   auto args = std::make_shared<ConnectionArgs>();
-  CLI::App* cmd = app.add_subcommand("info", "Show a distband server's version, limits and options");
+  CLI::App* cmd = app.add_subcommand(kRemoteCommands[2].name, kRemoteCommands[2].description);
   addConnectionFlags(cmd, args.get());
   return {cmd, [args, &ctx] {
             std::unique_ptr<RemoteClient> connection = connect(*args, "info", ctx);
@@ -502,7 +502,7 @@ CliCommand registerHealth(CLI::App& app, const CliContext& ctx) {
     std::string service;
   };
   auto args = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("health", "grpc.health.v1 check of a distband server (exit 0 iff SERVING)");
+  CLI::App* cmd = app.add_subcommand(kRemoteCommands[3].name, kRemoteCommands[3].description);
   addConnectionFlags(cmd, &args->connection);
   cmd->add_option("--service", args->service, "Service name (\"\": the whole server)");
   return {cmd, [args, &ctx] {

@@ -6,6 +6,8 @@
 #include <fstream>
 #include <sstream>
 
+#include <sys/wait.h>
+
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
 
@@ -219,6 +221,32 @@ TEST(RemoteCliTest, UploadInfoHealth) {
   ASSERT_EQ(f.run({"health", "--server", f.address}), 0) << f.err.str();
   EXPECT_EQ(f.out.str(), "SERVING\n");
   EXPECT_EQ(f.run({"upload", "--server", f.address, "--mesh", f.path("missing.obj")}), 2);
+}
+
+// The front `distband` binary has no gRPC in it: it hands the service's commands, arguments unchanged, to the
+// distband-remote binary beside it. Run as a real process against the in-process server.
+TEST(RemoteCliTest, TheFrontBinaryHandsServiceCommandsToDistbandRemote) {
+  Fixture f;
+  auto run = [&](const std::string& args, std::string* out) {
+    const std::string cmd = std::string(DISTBAND_CLI_BINARY) + " " + args + " 2>&1";
+    FILE* p = ::popen(cmd.c_str(), "r");
+    if (!p) return -1;
+    char buf[4096];
+    out->clear();
+    for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out->append(buf, n);
+    const int status = ::pclose(p);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  };
+  std::string out;
+  ASSERT_EQ(run("info --server " + f.address, &out), 0) << out;
+  EXPECT_NE(out.find("compute threads    2"), std::string::npos) << out;
+  ASSERT_EQ(run("health --server " + f.address, &out), 0) << out;
+  EXPECT_EQ(out, "SERVING\n");
+  EXPECT_EQ(run("query --help", &out), 0) << out;
+  EXPECT_NE(out.find("Usage: distband query"), std::string::npos) << out;  // the helper keeps the user's argv[0]
+  EXPECT_EQ(run("--help", &out), 0) << out;
+  for (const RemoteCommandName& r : kRemoteCommands) EXPECT_NE(out.find(r.name), std::string::npos) << out;
+  EXPECT_EQ(run("upload --server " + f.address + " --mesh " + f.path("missing.obj"), &out), 2) << out;
 }
 
 }  // namespace
