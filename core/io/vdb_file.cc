@@ -1,6 +1,7 @@
 #include "core/io/vdb_file.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cstring>
 #include <fstream>
@@ -104,17 +105,37 @@ void putNodeValues(std::string& out, const T* values, size_t count, const uint64
     putBlosc(out, values, count * sizeof(T));
     return;
   }
-  // Only the active values, and for the mask kinds the mask that selects each inactive value.
-  std::vector<T> active;
-  active.reserve(count);
+  // Only the active values, and for the mask kinds the mask that selects each inactive value. Scratch on the stack
+  // for leaves (this runs once per leaf, on every thread), on the heap for the few internal nodes.
   const bool selects = meta == kMaskAndNoInactiveVals || meta == kMaskAndOneInactiveVal || meta == kMaskAndTwoInactiveVals;
-  std::vector<uint64_t> selection(selects ? count / 64 : 0, 0);
-  for (size_t i = 0; i < count; ++i) {
-    if (bitOn(value_mask, i)) active.push_back(values[i]);
-    else if (selects && values[i] == inactive[1]) selection[i >> 6] |= uint64_t(1) << (i & 63);
+  std::array<T, kBrickVoxels> active_leaf;
+  std::array<uint64_t, kBrickVoxels / 64> selection_leaf{};
+  std::vector<T> active_node;
+  std::vector<uint64_t> selection_node;
+  T* active = active_leaf.data();
+  uint64_t* selection = selection_leaf.data();
+  if (count > size_t(kBrickVoxels)) {
+    active_node.resize(count);
+    selection_node.assign(count / 64, 0);
+    active = active_node.data();
+    selection = selection_node.data();
   }
-  if (selects) out.append(reinterpret_cast<const char*>(selection.data()), selection.size() * sizeof(uint64_t));
-  putBlosc(out, active.data(), active.size() * sizeof(T));
+  size_t n = 0;
+  for (size_t w = 0; w < count / 64; ++w) {
+    const uint64_t on = value_mask[w];
+    if (on == ~uint64_t(0)) {
+      std::memcpy(active + n, values + w * 64, 64 * sizeof(T));
+      n += 64;
+      continue;
+    }
+    for (size_t b = 0; b < 64; ++b) {
+      const size_t i = w * 64 + b;
+      if ((on >> b) & 1) active[n++] = values[i];
+      else if (selects && values[i] == inactive[1]) selection[w] |= uint64_t(1) << b;
+    }
+  }
+  if (selects) out.append(reinterpret_cast<const char*>(selection), count / 64 * sizeof(uint64_t));
+  putBlosc(out, active, n * sizeof(T));
 }
 
 template <class T>

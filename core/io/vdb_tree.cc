@@ -255,15 +255,26 @@ int64_t VdbTree<T>::activeVoxels() const {
 
 template <class T>
 bool VdbTree<T>::activeBounds(Coord* min, Coord* max) const {
+  // Per leaf from its mask words: offset (x << 6) | (y << 3) | z, so word w is the plane x = w with bits (y << 3) | z,
+  // and OR-ing the words gives the (y, z) footprint of the leaf.
   bool any = false;
-  for (const Leaf* l : leaves_)
-    for (size_t w = 0; w < l->mask.words.size(); ++w)
-      for (uint64_t bits = l->mask.words[w]; bits; bits &= bits - 1) {
-        const Coord c = l->origin + brickLocal(int(w * 64) + std::countr_zero(bits));
-        if (!any) *min = *max = c, any = true;
-        min->x = std::min(min->x, c.x), min->y = std::min(min->y, c.y), min->z = std::min(min->z, c.z);
-        max->x = std::max(max->x, c.x), max->y = std::max(max->y, c.y), max->z = std::max(max->z, c.z);
-      }
+  for (const Leaf* l : leaves_) {
+    uint64_t yz = 0;
+    int x0 = 8, x1 = -1;
+    for (int w = 0; w < 8; ++w)
+      if (l->mask.words[size_t(w)]) yz |= l->mask.words[size_t(w)], x0 = std::min(x0, w), x1 = w;
+    if (!yz) continue;
+    uint8_t ys = 0, zs = 0;
+    for (int y = 0; y < 8; ++y) {
+      const uint8_t row = uint8_t(yz >> (8 * y));
+      if (row) ys |= uint8_t(1 << y), zs |= row;
+    }
+    const Coord lo = l->origin + Coord{x0, std::countr_zero(ys), std::countr_zero(zs)};
+    const Coord hi = l->origin + Coord{x1, 7 - std::countl_zero(ys), 7 - std::countl_zero(zs)};
+    if (!any) *min = lo, *max = hi, any = true;
+    min->x = std::min(min->x, lo.x), min->y = std::min(min->y, lo.y), min->z = std::min(min->z, lo.z);
+    max->x = std::max(max->x, hi.x), max->y = std::max(max->y, hi.y), max->z = std::max(max->z, hi.z);
+  }
   return any;
 }
 
