@@ -81,7 +81,16 @@ VdbTree<T>::~VdbTree() = default;
 
 template <class T>
 typename VdbTree<T>::Leaf* VdbTree<T>::touchLeaf(const Coord& origin) {
+  bool created = false;
+  Leaf* leaf = touchLeaf(origin, &created);
+  if (created) fillBackground(leaf);
+  return leaf;
+}
+
+template <class T>
+typename VdbTree<T>::Leaf* VdbTree<T>::touchLeaf(const Coord& origin, bool* created) {
   auto [it, inserted] = index_.try_emplace(origin, nullptr);
+  *created = inserted;
   if (!inserted) return it->second;
   if (slabs_.empty() || slab_used_ == kSlabLeaves) {
     slabs_.emplace_back(new Leaf[kSlabLeaves]);  // values left unset: written below, the slab's pages on first use
@@ -89,7 +98,6 @@ typename VdbTree<T>::Leaf* VdbTree<T>::touchLeaf(const Coord& origin) {
   }
   Leaf* leaf = &slabs_.back()[slab_used_++];
   leaf->origin = origin;
-  leaf->values.fill(background_);
   leaves_.push_back(leaf);
   it->second = leaf;
   return leaf;

@@ -5,7 +5,9 @@
 // Contract:
 //   * Building: touchLeaf(origin) creates (or finds) the leaf at an 8-aligned origin, its values set to the
 //     background and no voxel active; the caller writes values and sets mask bits (Leaf::mask = active voxels). Leaf
-//     creation is single-threaded; filling distinct leaves from several threads is safe.
+//     creation is single-threaded; filling distinct leaves from several threads is safe. touchLeaf(origin, &created)
+//     leaves a new leaf's values unset, for the caller to fill with fillBackground() on its own thread (so creating
+//     many leaves at once is not a serial pass over their 2 KiB each).
 //   * seal() ends building: leaves are put in OpenVDB's tree order (root children by origin, then table offsets;
 //     the order the file format needs) and the internal nodes' tables are made; afterwards no leaf may be added,
 //     leaves() is in tree order and value() answers. Every internal-node and root tile is inactive.
@@ -38,6 +40,7 @@ class VdbTree {
 
   struct Leaf {
     Coord origin;
+    uint32_t tag = 0;                       ///< free for a builder's bookkeeping (fits the padding before mask)
     BrickMask mask;                         ///< active voxels (brick order = OpenVDB's leaf order, z fastest)
     std::array<T, kBrickVoxels> values;
   };
@@ -65,6 +68,8 @@ class VdbTree {
   VdbTree& operator=(const VdbTree&) = delete;
 
   Leaf* touchLeaf(const Coord& origin);
+  Leaf* touchLeaf(const Coord& origin, bool* created);
+  void fillBackground(Leaf* leaf) const { leaf->values.fill(background_); }
   void seal();
   void signedFloodFill();
   bool sealed() const { return sealed_; }

@@ -71,16 +71,34 @@ void VdbFieldBuilder::add(const Brick& brick) {
 
 void VdbFieldBuilder::add(const SegmentBricks& segment) {
   // Leaves are created on this thread; filling them is then independent per leaf.
+  // New leaves get their background there too. A segment names each brick once; one that does not (a server is not
+  // trusted) has its repeats applied afterwards on this thread, in order, so no leaf is filled by two threads at once.
   const size_t n = segment.bricks.size();
+  const uint32_t tag = ++segments_added_;
   std::vector<VdbTree<float>::Leaf*> leaves(n, nullptr);
+  std::vector<uint8_t> created(n, 0);
+  std::vector<size_t> repeats;
   for (size_t i = 0; i < n; ++i) {
     const Brick& b = segment.bricks[i];
-    if (!b.mask.empty()) leaves[i] = distance_.touchLeaf(b.origin);
+    if (b.mask.empty()) continue;
+    bool is_new = false;
+    VdbTree<float>::Leaf* leaf = distance_.touchLeaf(b.origin, &is_new);
+    if (!is_new && leaf->tag == tag) {
+      repeats.push_back(i);
+      continue;
+    }
+    leaf->tag = tag;
+    leaves[i] = leaf;
+    created[i] = is_new;
   }
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i != r.end(); ++i)
-      if (leaves[i]) fillLeaf(leaves[i], segment.bricks[i].mask, segment.bricks[i].values);
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (!leaves[i]) continue;
+      if (created[i]) distance_.fillBackground(leaves[i]);
+      fillLeaf(leaves[i], segment.bricks[i].mask, segment.bricks[i].values);
+    }
   });
+  for (size_t i : repeats) fillLeaf(distance_.touchLeaf(segment.bricks[i].origin), segment.bricks[i].mask, segment.bricks[i].values);
   if (closest32_ || closest64_)
     for (const Brick& b : segment.bricks) addClosest(b);
 }

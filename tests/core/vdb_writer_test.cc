@@ -254,6 +254,33 @@ TEST(VdbWriterTest, ClosestIdsAndMetadataRoundTrip) {
   }
 }
 
+// A segment from an untrusted server may name a brick twice: both are applied, in order (the later value wins),
+// without two threads filling one leaf.
+TEST(VdbWriterTest, ABrickTwiceInOneSegmentIsAppliedInOrder) {
+  const Grid grid({0, 0, 0}, 1.0, {64, 64, 64});
+  VdbFieldBuilder builder(grid, 3.0f);
+  SegmentBricks segment;
+  for (int k = 0; k < 200; ++k) {
+    Brick b;
+    b.origin = {8 * (k % 4), 8 * (k / 4 % 4), 0};  // 16 origins, each many times
+    b.mask.set(k % kBrickVoxels);
+    b.values[size_t(k % kBrickVoxels)] = float(k) / 100.f;
+    b.mask.set(0);
+    b.values[0] = float(k) / 1000.f;
+    segment.bricks.push_back(b);
+  }
+  builder.add(segment);
+  builder.finish();
+  for (int k = 0; k < 200; ++k) {
+    const Coord origin{8 * (k % 4), 8 * (k / 4 % 4), 0};
+    if (k % kBrickVoxels) EXPECT_EQ(builder.value(origin + brickLocal(k % kBrickVoxels)), float(k) / 100.f);
+  }
+  for (int o = 0; o < 16; ++o) {  // voxel 0 of origin o = k % 16: the last k naming it wins
+    const int last = o < 8 ? 192 + o : 176 + o;
+    EXPECT_EQ(builder.value({8 * (o % 4), 8 * (o / 4), 0}), float(last) / 1000.f);
+  }
+}
+
 TEST(VdbWriterTest, AnEmptyFieldIsAReadableEmptyLevelSet) {
   const Grid grid({0, 0, 0}, 1.0, {8, 8, 8});
   VdbFieldBuilder builder(grid, 3.0f);
