@@ -1,10 +1,13 @@
 #include "core/seeds/volume_seeds.h"
 
 #include <algorithm>
+#include <atomic>
+#include <cstring>
 #include <iterator>
 #include <memory>
 
 #include <fmt/format.h>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 namespace distband {
@@ -24,11 +27,41 @@ struct Slice {
 // Nothing here allocates per grid voxel beyond the signed case's region (1 byte a voxel, which the engine needs): a
 // dense table of site ids (4 bytes a voxel, 4 GiB at 1024^3) used to stand here, and filling it, one thread
 // first-touching every page, took seconds that a cancel could not interrupt.
+namespace {
+
+// Whether any byte of `mask` is nonzero (want_zero = false) or zero (true): 8 bytes a step, 1 MiB slices on the
+// caller's TBB arena, every slice stopping once one found it (a whole-grid field read 128 MiB here one byte at a
+// time on one thread: 0.5 % of a 1-thread run, a serial part that 16 threads would not share).
+bool maskHas(const std::vector<uint8_t>& mask, bool want_zero) {
+  constexpr size_t kSlice = size_t(1) << 20;
+  std::atomic<bool> found{false};
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, (mask.size() + kSlice - 1) / kSlice, 1),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t s = r.begin(); s != r.end() && !found.load(std::memory_order_relaxed); ++s) {
+                        const uint8_t* p = mask.data() + s * kSlice;
+                        const size_t n = std::min(kSlice, mask.size() - s * kSlice);
+                        size_t i = 0;
+                        for (; i + 8 <= n; i += 8) {
+                          uint64_t w;
+                          std::memcpy(&w, p + i, 8);
+                          // A zero byte: the classic (w - 0x01..) & ~w & 0x80.. test.
+                          const bool hit = want_zero ? ((w - 0x0101010101010101ull) & ~w & 0x8080808080808080ull) != 0
+                                                     : w != 0;
+                          if (hit) break;
+                        }
+                        for (; i < n; ++i)
+                          if ((p[i] == 0) == want_zero) break;
+                        if (i < n) found.store(true, std::memory_order_relaxed);
+                      }
+                    });
+  return found.load();
+}
+
+}  // namespace
+
 std::string checkSeedMask(const std::vector<uint8_t>& mask, bool signed_distance) {
-  const bool any_seed = std::any_of(mask.begin(), mask.end(), [](uint8_t v) { return v != 0; });
-  if (!any_seed) return "the seed mask has no nonzero voxel";
-  if (signed_distance && std::none_of(mask.begin(), mask.end(), [](uint8_t v) { return v == 0; }))
-    return "the seed mask has no zero voxel, so a signed field is undefined";
+  if (!maskHas(mask, false)) return "the seed mask has no nonzero voxel";
+  if (signed_distance && !maskHas(mask, true)) return "the seed mask has no zero voxel, so a signed field is undefined";
   return {};
 }
 

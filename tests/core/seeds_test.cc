@@ -167,6 +167,22 @@ TEST(VolumeSeedsTest, Errors) {
   ASSERT_EQ(s.points.size(), 1u) << "output must be untouched on error";
 }
 
+// checkSeedMask scans in word steps and parallel slices: a lone seed (or a lone zero) anywhere, at any size, counts.
+TEST(VolumeSeedsTest, CheckSeedMaskFindsALoneVoxelAnywhere) {
+  for (size_t size : {size_t(1), size_t(7), size_t(8), size_t(9), size_t(1) << 20, (size_t(3) << 20) + 5}) {
+    for (size_t at : {size_t(0), size / 2, size - 1}) {
+      std::vector<uint8_t> mask(size, 0);
+      EXPECT_NE(checkSeedMask(mask, false), "") << size;
+      mask[at] = 200;
+      EXPECT_EQ(checkSeedMask(mask, false), "") << size << " " << at;
+      std::vector<uint8_t> full(size, 1);
+      EXPECT_NE(checkSeedMask(full, true), "") << size;
+      full[at] = 0;
+      EXPECT_EQ(checkSeedMask(full, size > 1), size > 1 ? "" : "the seed mask has no nonzero voxel") << size << " " << at;
+    }
+  }
+}
+
 TEST(VolumeSeedsTest, NonzeroValuesOtherThanOneCount) {
   const Coord d{6, 6, 6};
   const Grid g({0, 0, 0}, 1.0, d);
