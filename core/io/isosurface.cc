@@ -147,9 +147,8 @@ std::string extractIsosurface(const VdbTree<float>& field, const Grid& grid, con
         for (int a = 0; a < 3; ++a) {
           const bool start_inside = cv.inside & 1;
           if (start_inside == bool((cv.inside >> (1 << a)) & 1)) continue;
-          Coord eb{}, ec{};
-          (&eb.x)[(a + 1) % 3] = 1;
-          (&ec.x)[(a + 2) % 3] = 1;
+          static constexpr Coord kAxis[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+          const Coord eb = kAxis[(a + 1) % 3], ec = kAxis[(a + 2) % 3];
           const Coord around[4] = {cv.cell, {cv.cell.x - eb.x, cv.cell.y - eb.y, cv.cell.z - eb.z},
                                    {cv.cell.x - eb.x - ec.x, cv.cell.y - eb.y - ec.y, cv.cell.z - eb.z - ec.z},
                                    {cv.cell.x - ec.x, cv.cell.y - ec.y, cv.cell.z - ec.z}};
