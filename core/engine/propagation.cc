@@ -229,14 +229,53 @@ void step(BandState& s, const FrontList& front) {
   });
 }
 
+namespace {
+
+// Appends the threads' lists `field` (ThreadBuffers::next or ::deferred) to `to` in thread order, through
+// `each(from, to)` for every entry, the copy split over the workers: on one thread it was a serial phase of every
+// step (it also first-touches fresh pages, ~3 ms a MiB on some virtual machines, and a front at 1024^3 is tens of
+// MB). False when the run must stop; `to` is then partly filled.
+template <typename Each>
+bool gatherLists(BandState& s, FrontList& to, FrontList ThreadBuffers::*field, Each&& each) {
+  std::vector<const FrontList*> lists;
+  std::vector<size_t> at{to.size()};  // list j goes to [at[j], at[j + 1])
+  for (auto& tb : s.buffers)
+    if (!(tb.*field).empty()) {
+      lists.push_back(&(tb.*field));
+      at.push_back(at.back() + (tb.*field).size());
+    }
+  const size_t base = at.front(), n = at.back();
+  to.reserve(n);  // exactly: resize alone may double the capacity
+  to.resize(n);   // uninitialised (FrontAllocator): the loop below writes every new entry
+  tbb::parallel_for(tbb::blocked_range<size_t>(base, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    size_t j = size_t(std::upper_bound(at.begin(), at.end(), r.begin()) - at.begin()) - 1;
+    for (size_t i = r.begin(); i != r.end(); ++j) {  // the part of list j in the range
+      const size_t end = std::min(r.end(), at[j + 1]);
+      const FrontEntry* from = lists[j]->data() + (i - at[j]);
+      for (; i != end; ++i, ++from) {
+        if (s.stoppingAt(i, 4096)) return;
+        each(*from, to[i]);
+      }
+    }
+  });
+  return !s.stopping();
+}
+
+}  // namespace
+
 FrontList gatherFront(BandState& s) {
   FrontList front;
   if (s.stopping()) return front;  // the run ends: no need to copy the partial buffers
-  size_t n = 0;
-  for (auto& tb : s.buffers) n += tb.next.size();
-  front.reserve(n);
+  // Snapshot each changed voxel's site as of the end of the step: the next step offers exactly these.
+  const bool ok = gatherLists(s, front, &ThreadBuffers::next, [&](const FrontEntry& e, FrontEntry& out) {
+    BrickState* b = s.table.get(e.brick);
+    const uint64_t k = b->key[e.offset].load(std::memory_order_relaxed);
+    b->listed.clear(e.offset);
+    out = {e.brick, e.offset, uint8_t(keyDir(k)), keySite(k)};
+  });
+  if (!ok) return FrontList();
+  const size_t n = front.size();
   for (auto& tb : s.buffers) {
-    if (!s.appendPolled(front, tb.next)) return FrontList();
     // A large buffer is given back rather than kept for the next step: the initial band's front can be tens of
     // MB, and later fronts are mostly much smaller (regrowing costs little next to the pushes that fill it).
     if (tb.next.capacity() > 65536) FrontList().swap(tb.next);
@@ -246,28 +285,13 @@ FrontList gatherFront(BandState& s) {
   // doublings, whose freed links would stay behind as heap holes.
   const size_t share = n / std::max<size_t>(1, s.buffers.size()) + 4096;
   for (auto& tb : s.buffers) tb.next.reserve(share);
-  // Snapshot each changed voxel's site as of the end of the step: the next step offers exactly these.
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, front.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i != r.end(); ++i) {
-      if (s.stoppingAt(i, 4096)) return;
-      BrickState* b = s.table.get(front[i].brick);
-      const uint64_t k = b->key[front[i].offset].load(std::memory_order_relaxed);
-      b->listed.clear(front[i].offset);
-      front[i].site = keySite(k);
-      front[i].dir = uint8_t(keyDir(k));
-    }
-  });
   return front;
 }
 
 bool collectDeferred(BandState& s) {
-  size_t n = s.deferred.size();
-  for (auto& tb : s.buffers) n += tb.deferred.size();
-  s.deferred.reserve(n);
-  for (auto& tb : s.buffers) {
-    if (!s.appendPolled(s.deferred, tb.deferred)) return false;
-    tb.deferred.clear();
-  }
+  if (!gatherLists(s, s.deferred, &ThreadBuffers::deferred, [](const FrontEntry& e, FrontEntry& out) { out = e; }))
+    return false;
+  for (auto& tb : s.buffers) tb.deferred.clear();
   return true;
 }
 
