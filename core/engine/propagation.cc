@@ -1,6 +1,8 @@
 #include "core/engine/propagation.h"
 
+#include <bit>
 #include <optional>
+#include <type_traits>
 #include <stdexcept>
 #include <tuple>
 
@@ -36,6 +38,16 @@ bool offer(BandState& s, BrickState* b, uint32_t bi, int off, uint64_t newkey, b
 
 namespace {
 
+// The push's stand-ins for missing neighbouring bricks (never written): one not created yet, all voxels untouched,
+// and one beyond the grid, all voxels marked exact.
+struct OutsideBrick : BrickState {
+  OutsideBrick() : BrickState({0, 0, 0}, false) {
+    for (auto& w : exact.words) w.store(~uint64_t(0), std::memory_order_relaxed);
+  }
+};
+BrickState absent_brick({0, 0, 0}, false);
+OutsideBrick outside_brick;
+
 template <bool kPoints, bool kExactBand>
 void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb) {
   // Members copied to locals: the atomics and buffer writes below would otherwise force reloads every link.
@@ -68,20 +80,27 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb) {
     plane_point = t[0];
     unit_normal = len2 > 0 ? n * (1.0 / std::sqrt(len2)) : Vec3d{};  // degenerate: bound 0, never rejects
   }
-  // Only a brick reaching past the grid's far faces needs per-voxel bounds checks (the near faces are brick
-  // faces, handled by the neighbouring-brick lookup).
-  const bool edge = pb->origin.x + kBrickSize > dims.x || pb->origin.y + kBrickSize > dims.y ||
-                    pb->origin.z + kBrickSize > dims.z;
-  // The 3x3x3 neighbouring bricks, looked up once each on demand: their ids and slots (a slot is re-read for every
-  // link, since another thread may create the brick meanwhile).
-  uint32_t nbr_index[27];
-  std::atomic<BrickState*>* nbr_slot[27];
-  uint32_t known = 1u << 13;  // bit i: nbr_index[i] valid; 13 is this brick
-  nbr_index[13] = e.brick;
+  // The neighbouring bricks this push's links reach, looked up once (slots read once: a brick another thread creates
+  // meanwhile reads as absent, which only costs a test its keys would have skipped; offer() goes to the real one).
+  // Stand-ins replace missing bricks so the link loop tests no pointer: a brick not created yet reads as untouched
+  // voxels, one beyond the grid as exact band voxels (skipped; other bands test for it).
+  BrickState* nb[27];
+  uint32_t nbi[27];
+  nb[13] = pb;
+  nbi[13] = e.brick;
   const Coord bcoord{pb->origin.x >> kBrickLog2, pb->origin.y >> kBrickLog2, pb->origin.z >> kBrickLog2};
+  for (uint32_t m = s.links.bricksFor(l, e.dir); m; m &= m - 1) {
+    const int i = std::countr_zero(m);
+    std::atomic<BrickState*>* slot = table.neighbourSlot(e.brick, pslot, bcoord, i % 3 - 1, (i / 3) % 3 - 1,
+                                                         i / 9 - 1, &nbi[i]);
+    BrickState* b = slot ? slot->load(std::memory_order_acquire) : &outside_brick;
+    nb[i] = b ? b : &absent_brick;
+  }
+  BrickState* const absent = &absent_brick;
+  BrickState* const outside = &outside_brick;
   bool deferred = false;
   // Decides on one target whose key was read as k.
-  auto decide = [&](const Link& d, BrickState* gb, uint32_t gbi, uint64_t k) {
+  auto decide = [&](const Link& d, uint64_t k) {
     const int goff = e.offset + d.offset;
     // The same site gives the same distance: nothing to offer (exact band voxels were skipped before their key).
     if (k != kUntouched && keySite(k) == site) return;
@@ -106,6 +125,7 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb) {
       d2 = float(tri->dist2(g));
     }
     const uint64_t newkey = packKey(d2, d.dir, site);
+    BrickState* gb = nb[d.brick];
     if (k != kUntouched) {
       if (newkey >= k || keyDist2(k) <= frozen2) return;  // no better, or final (delivered)
       if (lifespan && step > gb->expiry[goff].load(std::memory_order_relaxed)) return;  // FINISHED
@@ -114,43 +134,44 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb) {
       deferred |= defer;
       return;
     }
-    if (!gb) gb = table.getOrCreate(gbi, &tb.bricks);
+    const uint32_t gbi = nbi[d.brick];
+    if (gb == absent) gb = table.getOrCreate(gbi, &tb.bricks);
     offer(s, gb, gbi, goff, newkey, d.propagates_to || stencil.propagates({p.x + d.x, p.y + d.y, p.z + d.z}), tb);
   };
-  // Triangle sites: phase 1 gathers every target's brick and key with independent loads, so their cache misses
-  // overlap; phase 2 decides on them (keys may change in between: offer() re-checks, and a stale key only costs a
-  // test a fresh one would have skipped). Point sites decide at once: their test is so cheap that the gathering
-  // cost more than it saved (+50 % instructions in the push).
+  // Triangle sites: phase 1 gathers every target's key with independent loads, so their cache misses overlap;
+  // phase 2 decides on them (keys may change in between: offer() re-checks, and a stale key only costs a test a
+  // fresh one would have skipped). Point sites decide at once: their test is so cheap that the gathering cost more
+  // than it saved (+50 % instructions in the push).
   struct Target {
     const Link* link;
-    BrickState* brick;
-    uint32_t brick_index;
     uint64_t key;
   };
   Target targets[32];
   int count = 0;
-  for (const Link& d : s.links.linksFor(l, e.dir)) {
-    if (edge && (uint32_t(p.x + d.x) >= dx || uint32_t(p.y + d.y) >= dy || uint32_t(p.z + d.z) >= dz)) continue;
-    const int goff = e.offset + d.offset;
-    BrickState* gb = pb;
-    uint32_t gbi = e.brick;
-    if (d.brick != 13) {
-      if (!(known & (1u << d.brick))) {
-        known |= 1u << d.brick;
-        nbr_slot[d.brick] = table.neighbourSlot(e.brick, pslot, bcoord, d.brick % 3 - 1, (d.brick / 3) % 3 - 1,
-                                                d.brick / 9 - 1, &nbr_index[d.brick]);
+  // Only a brick reaching past the grid's far faces needs per-voxel bounds checks (the near faces are brick faces,
+  // handled by the neighbouring bricks); the loop is compiled both ways.
+  auto scan = [&](auto edge_tag) {
+    for (const Link& d : s.links.linksFor(l, e.dir)) {
+      if constexpr (decltype(edge_tag)::value)
+        if (uint32_t(p.x + d.x) >= dx || uint32_t(p.y + d.y) >= dy || uint32_t(p.z + d.z) >= dz) continue;
+      BrickState* const gb = nb[d.brick];
+      const int goff = e.offset + d.offset;
+      if constexpr (kExactBand) {
+        if (gb->exact.test(goff)) continue;  // also every voxel of the stand-in beyond the grid
+      } else if (gb == outside) {
+        continue;
       }
-      gbi = nbr_index[d.brick];
-      if (gbi == BrickTable::kNoBrick) continue;
-      gb = nbr_slot[d.brick]->load(std::memory_order_acquire);
+      if (region_map && region_map[s.grid.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
+      const uint64_t k = gb->key[goff].load(std::memory_order_relaxed);
+      if constexpr (kPoints) decide(d, k);
+      else targets[count++] = {&d, k};
     }
-    if (kExactBand && gb && gb->exact.test(goff)) continue;
-    if (region_map && region_map[s.grid.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
-    const uint64_t k = gb ? gb->key[goff].load(std::memory_order_relaxed) : kUntouched;
-    if constexpr (kPoints) decide(d, gb, gbi, k);
-    else targets[count++] = {&d, gb, gbi, k};
-  }
-  for (int i = 0; i < count; ++i) decide(*targets[i].link, targets[i].brick, targets[i].brick_index, targets[i].key);
+  };
+  const bool edge = pb->origin.x + kBrickSize > dims.x || pb->origin.y + kBrickSize > dims.y ||
+                    pb->origin.z + kBrickSize > dims.z;
+  if (edge) scan(std::true_type{});
+  else scan(std::false_type{});
+  for (int i = 0; i < count; ++i) decide(*targets[i].link, targets[i].key);
   if (deferred) tb.deferred.push_back({e.brick, e.offset, uint8_t(kNoDirection), site});
 }
 
