@@ -10,6 +10,7 @@
 #include <tbb/parallel_sort.h>
 
 #include "core/interruptible.h"
+#include "core/segment_emission.h"
 
 namespace distband::engine {
 
@@ -95,10 +96,8 @@ bool emitSegment(BandState& s, const SegmentCallback& cb, int index, double lowe
     while (c1 < n && outs < per_chunk && c1 - c0 < kBuildBricks) outs += slot[c1++] != 0;
     // Whole segments are built where they are delivered (no second copy of 2 KiB a brick on one thread); chunks apart.
     std::vector<Brick>& out = max_chunk ? part : whole.bricks;
-    if (max_chunk)
-      part.assign(outs, Brick{});
-    else
-      whole.bricks.resize(base + outs);
+    if (max_chunk) part.clear();
+    appendUnsetBricks(out, outs);  // buildChunk writes every value
     buildChunk(s, c0, c1, slot, keep, max_chunk ? base : 0, out);
     if (last) {
       for (size_t i = c0; i < c1; ++i) s.table.release(pending[i]);
@@ -160,6 +159,7 @@ void buildChunk(BandState& s, size_t c0, size_t c1, const std::vector<uint32_t>&
       for (int off = 0; off < kBrickVoxels; ++off) {
         const uint64_t k = b->key[off].load(std::memory_order_relaxed);
         sites[off] = kNoSite;
+        brick.values[off] = 0;  // not delivered (the bricks were made without values: appendUnsetBricks)
         if (k == kUntouched || keyDist2(k) > s.thr2) continue;
         if (b->emitted.test(off)) continue;
         const Coord c = b->origin + brickLocal(off);
