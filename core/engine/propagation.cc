@@ -19,7 +19,7 @@ namespace distband::engine {
 
 namespace {
 // offer(), inlined into the push (a call and its seven arguments were ~15 % of an offer's instructions).
-inline bool offerInline(BandState& s, BrickState* b, uint32_t bi, int off, uint64_t newkey, bool propagates,
+[[gnu::always_inline]] inline bool offerInline(BandState& s, BrickState* b, uint32_t bi, int off, uint64_t newkey, bool propagates,
                         ThreadBuffers& tb) {
   uint64_t k = b->key[off].load(std::memory_order_relaxed);
   while (newkey < k) {
