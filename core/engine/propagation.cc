@@ -177,8 +177,8 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePre
   Target targets[32];
   int count = 0;
   // Only a brick reaching past the grid's far faces needs per-voxel bounds checks (the near faces are brick faces,
-  // handled by the neighbouring bricks); the loop is compiled both ways.
-  auto scan = [&](auto edge_tag) {
+  // handled by the neighbouring bricks), and only seeds with regions a region test: the loop is compiled each way.
+  auto scan = [&](auto edge_tag, auto region_tag) {
     for (const Link& d : s.links.linksFor(l, e.dir)) {
       if constexpr (decltype(edge_tag)::value)
         if (uint32_t(p.x + d.x) >= dx || uint32_t(p.y + d.y) >= dy || uint32_t(p.z + d.z) >= dz) continue;
@@ -189,7 +189,8 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePre
       } else if (gb == outside) {
         continue;
       }
-      if (region_map && region_map[s.grid.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
+      if constexpr (decltype(region_tag)::value)
+        if (region_map[s.grid.denseIndex({p.x + d.x, p.y + d.y, p.z + d.z})] != region) continue;
       const uint64_t k = gb->key[goff].load(std::memory_order_relaxed);
       if constexpr (kPoints) {
         decide(d, k);
@@ -203,8 +204,8 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePre
   };
   const bool edge = pb->origin.x + kBrickSize > dims.x || pb->origin.y + kBrickSize > dims.y ||
                     pb->origin.z + kBrickSize > dims.z;
-  if (edge) scan(std::true_type{});
-  else scan(std::false_type{});
+  if (region_map) edge ? scan(std::true_type{}, std::true_type{}) : scan(std::false_type{}, std::true_type{});
+  else edge ? scan(std::true_type{}, std::false_type{}) : scan(std::false_type{}, std::false_type{});
   for (int i = 0; i < count; ++i) decide(*targets[i].link, targets[i].key);
   if (deferred) tb.deferred.push_back({e.brick, e.offset, uint8_t(kNoDirection), site});
 }
