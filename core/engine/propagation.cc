@@ -377,7 +377,9 @@ FrontList gatherFront(BandState& s) {
   const bool ok = gatherLists(s, front, &ThreadBuffers::next, [&](const FrontEntry& e, FrontEntry& out) {
     BrickState* b = s.table.get(e.brick);
     const uint64_t k = b->key[e.offset].load(std::memory_order_relaxed);
-    b->listed.clear(e.offset);
+    // Every bit set in this word belongs to an entry of this front, so the whole word is cleared with a plain store
+    // (threads clearing the same word all store 0): an atomic AND per entry was ~1/4 of the gather's time.
+    b->listed.words[e.offset >> 6].store(0, std::memory_order_relaxed);
     out = {e.brick, e.offset, uint8_t(keyDir(k)), keySite(k)};
   });
   if (!ok) return FrontList();
