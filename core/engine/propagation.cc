@@ -311,13 +311,19 @@ void stepFromBand(BandState& s) {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, band.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
     ThreadBuffers& tb = s.buffers.local();
     TrianglePrep prep;
+    Coord brick_coord{-1, -1, -1};  // band voxels come brick by brick (see insertBand): the brick carries over
+    uint32_t bi = BrickTable::kNoBrick;
+    const BrickState* b = nullptr;
     for (size_t i = r.begin(); i != r.end(); ++i) {
       if (s.stoppingAt(i, 256)) return;
       const BandVoxel& v = band[i];
       if (v.site == kNoSite) continue;
       const Coord bc{v.voxel.x >> kBrickLog2, v.voxel.y >> kBrickLog2, v.voxel.z >> kBrickLog2};
-      const uint32_t bi = s.table.idAt(bc);
-      const BrickState* b = bi == BrickTable::kNoBrick ? nullptr : s.table.get(bi);
+      if (!(bc == brick_coord)) {
+        brick_coord = bc;
+        bi = s.table.idAt(bc);
+        b = bi == BrickTable::kNoBrick ? nullptr : s.table.get(bi);
+      }
       const int off = brickOffset(v.voxel.x & 7, v.voxel.y & 7, v.voxel.z & 7);
       if (!b || keySite(b->key[off].load(std::memory_order_relaxed)) != v.site) continue;  // beyond the limit
       pushWith(s, {bi, uint16_t(off), uint8_t(kNoDirection), v.site}, tb, prep);
