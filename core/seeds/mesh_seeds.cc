@@ -346,6 +346,18 @@ void buildPseudonormals(MeshSigner* s, const Interrupter* interrupter) {
   }
 }
 
+// int(std::ceil(v)) and int(std::floor(v)), the same integers for every v (both convert by truncation), in a few
+// instructions: baseline x86-64 has no roundsd, and the inline ceil and floor sequences, four for every row of
+// voxels, were ~11 % of the seed scan's instructions (armadillo 256^3 hw3: 531 M -> 472 M).
+inline int ceilInt(double v) {
+  const int i = int(v);
+  return i + (double(i) < v);
+}
+inline int floorInt(double v) {
+  const int i = int(v);
+  return i - (double(i) > v);
+}
+
 // Squared voxels: rounding in the bounding-box and exact distances of grid-sized coordinates is ~1e-12 of this.
 constexpr double kBoxPruneMargin = 1e-6;
 
@@ -471,13 +483,13 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
           const double rest = r2 - exy2;
           if (rest < 0) continue;
           const double reach = std::sqrt(rest);
-          int z0 = std::max(lo.z, int(std::ceil(bz0 - reach))), z1 = std::min(hi.z, int(std::floor(bz1 + reach)));
+          int z0 = std::max(lo.z, ceilInt(bz0 - reach)), z1 = std::min(hi.z, floorInt(bz1 + reach));
           const double row_plane = n.x * x + n.y * y - plane0;
           // ... and within the radius of the triangle's plane (when the plane is not nearly parallel to z).
           if (std::abs(n.z) > 0.25) {
             const double za = (-radius - row_plane) / n.z, zb = (radius - row_plane) / n.z;
-            z0 = std::max(z0, int(std::ceil(std::min(za, zb))));
-            z1 = std::min(z1, int(std::floor(std::max(za, zb))));
+            z0 = std::max(z0, ceilInt(std::min(za, zb)));
+            z1 = std::min(z1, floorInt(std::max(za, zb)));
           }
           for (int z = z0; z <= z1; ++z) {
             const double plane = row_plane + n.z * z;
