@@ -122,7 +122,7 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePre
   BrickState* const outside = &outside_brick;
   bool deferred = false;
   // Decides on one target whose key was read as k.
-  auto decide = [&](const Link& d, uint64_t k) {
+  auto decide = [&](const Link& d, uint64_t k) __attribute__((always_inline)) {
     const int goff = e.offset + d.offset;
     // The same site gives the same distance: nothing to offer (exact band voxels were skipped before their key;
     // triangle sites filtered these out while gathering).
@@ -175,7 +175,7 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePre
   int count = 0;
   // Only a brick reaching past the grid's far faces needs per-voxel bounds checks (the near faces are brick faces,
   // handled by the neighbouring bricks), and only seeds with regions a region test: the loop is compiled each way.
-  auto scan = [&](auto edge_tag, auto region_tag) {
+  auto scan = [&](auto edge_tag, auto region_tag) __attribute__((always_inline)) {
     for (const Link& d : s.links.linksFor(l, e.dir)) {
       if constexpr (decltype(edge_tag)::value)
         if (uint32_t(p.x + d.x) >= dx || uint32_t(p.y + d.y) >= dy || uint32_t(p.z + d.z) >= dz) continue;
