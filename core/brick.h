@@ -37,8 +37,14 @@ struct BrickMask {
 };
 
 struct Brick {
+  /// Tag of the constructor that leaves `values` unset, for producers whose parallel fill writes every value: zeroing
+  /// 2 KiB a brick while constructing them (one thread, the fill's first touch of fresh pages) was a serial phase.
+  struct NoValues {};
+  Brick() : values{} {}
+  explicit Brick(NoValues) {}
+
   Coord origin;
-  std::array<float, kBrickVoxels> values{};
+  std::array<float, kBrickVoxels> values;  // zero from Brick(), unset from Brick(NoValues)
   BrickMask mask;
   /// Closest-feature ids of the masked voxels (EngineOptions::closest_features; see Seeds::FeatureKind), indexed
   /// like `values`; empty when not requested.

@@ -83,6 +83,13 @@ struct NoInitAllocator : std::allocator<T> {
   }
 };
 
+/// Appends `n` bricks with unset values (Brick::NoValues) to `out`, for a producer whose parallel fill then writes
+/// every value (zero where not delivered): zeroing 2 KiB a brick here, on one thread, came before that fill.
+inline void appendUnsetBricks(std::vector<Brick>& out, size_t n) {
+  if (out.size() + n > out.capacity()) out.reserve(out.size() + n);
+  for (size_t i = 0; i < n; ++i) out.emplace_back(Brick::NoValues{});
+}
+
 template <typename Source, typename = void>
 struct SourceHasFeatures : std::false_type {};
 template <typename Source>
@@ -152,7 +159,8 @@ bool emitSegments(const Grid& grid, const EngineOptions& options, const Source& 
     for (size_t c0 = 0; c0 < list.size() || c0 == 0;) {
       if (isInterrupted(interrupter)) return false;
       const size_t c1 = list.size() - c0 <= per_chunk ? list.size() : c0 + per_chunk;
-      std::vector<Brick> part(c1 - c0);
+      std::vector<Brick> part;
+      appendUnsetBricks(part, c1 - c0);
       tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 16), [&](const tbb::blocked_range<size_t>& r) {
         if (isInterrupted(interrupter)) return;
         for (size_t i = r.begin(); i != r.end(); ++i) {
@@ -163,7 +171,10 @@ bool emitSegments(const Grid& grid, const EngineOptions& options, const Source& 
           for (int off = 0; off < kBrickVoxels; ++off) {
             double d;
             const Coord c = brick.origin + brickLocal(off);
-            if (!source.value(b, off, c, &d) || segmentOf(std::abs(d)) != s) continue;
+            if (!source.value(b, off, c, &d) || segmentOf(std::abs(d)) != s) {
+              brick.values[off] = 0;  // the bricks were made without values (appendUnsetBricks)
+              continue;
+            }
             brick.values[off] = float(d * h);
             brick.mask.set(off);
             if constexpr (SourceHasFeatures<Source>::value)

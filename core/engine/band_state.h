@@ -62,6 +62,16 @@ struct FrontAllocator {
     if (bytes < kMapBytes) std::allocator<T>().deallocate(p, n);
     else ::munmap(p, bytes);
   }
+  // resize() leaves new entries uninitialised: the lists are filled by parallel copies right after (a value-
+  // initialising resize would be a serial pass over fresh pages first).
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
   template <class U>
   bool operator==(const FrontAllocator<U>&) const { return true; }
 };
@@ -111,19 +121,6 @@ struct BandState {
   /// enough: TBB's auto_partitioner hands out ranges of up to 1/(4 x threads) of a loop, which at 1024^3 is a few
   /// hundred milliseconds of work. `every` keeps a poll interval near 0.1 ms of the loop's work per item.
   bool stoppingAt(size_t i, size_t every) const { return (i & (every - 1)) == 0 && stopping(); }
-  /// Appends `from` to `to` in slices of 256 Ki entries with a poll between them; false when the run must stop.
-  /// The copy first-touches fresh pages on one thread, ~3 ms a MiB on some virtual machines, and a front at 1024^3
-  /// is tens of MB. Callers reserve the total first (one allocation for all the threads' lists).
-  template <typename List>
-  bool appendPolled(List& to, const List& from) const {
-    constexpr size_t kSlice = size_t(256) << 10;
-    for (size_t i = 0; i < from.size(); i += kSlice) {
-      if (stopping()) return false;
-      to.insert(to.end(), from.begin() + i, from.begin() + std::min(from.size(), i + kSlice));
-    }
-    return true;
-  }
-
   uint8_t regionOf(const Coord& c) const { return region ? region[grid.denseIndex(c)] : 0; }
   uint64_t keyAt(const Coord& c) const {
     if (!grid.contains(c)) return kUntouched;

@@ -34,6 +34,7 @@ LinkTables::LinkTables(const Stencil& stencil) {
         link.brick = (sz + 1) * 9 + (sy + 1) * 3 + (sx + 1);
         link.offset = brickOffset(lx & 7, ly & 7, lz & 7) - brickOffset(src.x, src.y, src.z);
         tables_[c * 32 + dir].push_back(link);
+        if (link.brick != 13) bricks_[c * 32 + dir] |= 1u << link.brick;
       }
     }
   }

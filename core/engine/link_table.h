@@ -32,12 +32,17 @@ class LinkTables {
   const std::vector<Link>& all() const { return links_; }
   /// The position class of a brick-local coordinate along one axis: 0, 1..6 or 7.
   static int positionClass(int v) { return v == 0 ? 0 : (v == kBrickSize - 1 ? 2 : 1); }
-  const std::vector<Link>& linksFor(const Coord& local, uint32_t dir) const {
-    return tables_[(positionClass(local.z) * 9 + positionClass(local.y) * 3 + positionClass(local.x)) * 32 + dir];
+  static int tableOf(const Coord& local, uint32_t dir) {
+    return (positionClass(local.z) * 9 + positionClass(local.y) * 3 + positionClass(local.x)) * 32 + int(dir);
   }
+  const std::vector<Link>& linksFor(const Coord& local, uint32_t dir) const { return tables_[tableOf(local, dir)]; }
+  /// The neighbouring bricks (bit Link::brick, never 13) that linksFor(local, dir) reaches: a push looks them up
+  /// once, before its links.
+  uint32_t bricksFor(const Coord& local, uint32_t dir) const { return bricks_[tableOf(local, dir)]; }
 
  private:
   std::vector<Link> links_;
+  uint32_t bricks_[27 * 32] = {};
   // links_ specialised for each position class of the source in its brick (per axis local 0, 1..6 or 7) and each
   // arrival direction: links whose target the previous offerer already reached with the same site are dropped.
   std::vector<Link> tables_[27 * 32];

@@ -37,7 +37,8 @@ void step(BandState& s, const FrontList& front);
 FrontList gatherFront(BandState& s);
 /// Moves the threads' held-back offers into BandState::deferred; false when the run must stop.
 bool collectDeferred(BandState& s);
-/// Held-back offers (this step's and earlier ones), deduplicated, as the next front.
+/// Held-back offers (this step's and earlier ones) as the next front. Not deduplicated: an offer two threads made
+/// for the same voxel in one step (both listed it) is replayed twice, which changes nothing.
 FrontList takeDeferred(BandState& s);
 /// Paper mode: voxels admitted beyond the previous threshold but not yet delivered start the new segment's
 /// lifespan clock.

@@ -1,6 +1,7 @@
 #include "core/seeds/mesh_seeds.h"
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -188,7 +189,56 @@ struct MeshSigner {
     return n.dot(p - cp) < 0;
   }
 
+  // sign() for pseudonormals: as below, but visiting only the delivered voxels (bit by bit; a thin band's bricks are
+  // mostly undelivered) and keeping the last triangle's plane (a brick's neighbouring voxels mostly share their
+  // closest triangle). Same tests in the same order, so the same signs: ~half of sign()'s instructions.
+  void signPseudonormal(Brick& brick, const uint32_t* sites) const {
+    constexpr double kBrickDiameter = 7 * 1.7320508075688772 + 0.5;
+    auto forEachDelivered = [&](auto&& visit) {
+      for (int w = 0; w < kBrickVoxels / 64; ++w)
+        for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1)
+          if (!visit(w * 64 + std::countr_zero(bits))) return;
+    };
+    int far = -1;
+    forEachDelivered([&](int i) {
+      if (sites[i] != kNoSite && std::abs(brick.values[i]) > kBrickDiameter * voxel_size) far = i;
+      return far < 0;
+    });
+    if (far >= 0) {
+      const Coord c = brick.origin + brickLocal(far);
+      const Vec3d p{double(c.x), double(c.y), double(c.z)};
+      if (insidePseudonormal(p, triangleOf(sites[far]), std::abs(brick.values[far]) / voxel_size))
+        forEachDelivered([&](int i) {
+          brick.values[i] = -std::abs(brick.values[i]);
+          return true;
+        });
+      return;
+    }
+    uint32_t last = kNoSite;
+    Vec3d n{}, v0{};
+    forEachDelivered([&](int i) {
+      if (sites[i] == kNoSite) return true;
+      const uint32_t t = triangleOf(sites[i]);
+      if (t != last) {
+        n = {double(face_n[t].x), double(face_n[t].y), double(face_n[t].z)};
+        v0 = verts[corners[t][0]];
+        last = t;
+      }
+      const Coord c = brick.origin + brickLocal(i);
+      const Vec3d p{double(c.x), double(c.y), double(c.z)};
+      const double dist = std::abs(brick.values[i]) / voxel_size;
+      // insidePseudonormal's first test, with the plane kept (the same arithmetic as Normal3f::dot).
+      const Vec3d q = p - v0;
+      const double plane = n.x * q.x + n.y * q.y + n.z * q.z;
+      const bool inside =
+          plane * plane >= dist * dist * (1 - 1e-5) ? plane < 0 : insidePseudonormal(p, t, dist);
+      if (inside) brick.values[i] = -std::abs(brick.values[i]);
+      return true;
+    });
+  }
+
   void sign(Brick& brick, const uint32_t* sites) const {
+    if (method == SignMethod::kPseudonormal) return signPseudonormal(brick, sites);
     struct Ball {
       Vec3d c;
       double r2;
@@ -294,6 +344,18 @@ void buildPseudonormals(MeshSigner* s, const Interrupter* interrupter) {
     for (size_t k = i; k < j; ++k) s->edge_n[uses[k].slot] = Normal3f(normalized(sum));
     i = j;
   }
+}
+
+// int(std::ceil(v)) and int(std::floor(v)), the same integers for every v (both convert by truncation), in a few
+// instructions: baseline x86-64 has no roundsd, and the inline ceil and floor sequences, four for every row of
+// voxels, were ~11 % of the seed scan's instructions (armadillo 256^3 hw3: 531 M -> 472 M).
+inline int ceilInt(double v) {
+  const int i = int(v);
+  return i + (double(i) < v);
+}
+inline int floorInt(double v) {
+  const int i = int(v);
+  return i - (double(i) > v);
 }
 
 // Squared voxels: rounding in the bounding-box and exact distances of grid-sized coordinates is ~1e-12 of this.
@@ -421,13 +483,13 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
           const double rest = r2 - exy2;
           if (rest < 0) continue;
           const double reach = std::sqrt(rest);
-          int z0 = std::max(lo.z, int(std::ceil(bz0 - reach))), z1 = std::min(hi.z, int(std::floor(bz1 + reach)));
+          int z0 = std::max(lo.z, ceilInt(bz0 - reach)), z1 = std::min(hi.z, floorInt(bz1 + reach));
           const double row_plane = n.x * x + n.y * y - plane0;
           // ... and within the radius of the triangle's plane (when the plane is not nearly parallel to z).
           if (std::abs(n.z) > 0.25) {
             const double za = (-radius - row_plane) / n.z, zb = (radius - row_plane) / n.z;
-            z0 = std::max(z0, int(std::ceil(std::min(za, zb))));
-            z1 = std::min(z1, int(std::floor(std::max(za, zb))));
+            z0 = std::max(z0, ceilInt(std::min(za, zb)));
+            z1 = std::min(z1, floorInt(std::max(za, zb)));
           }
           for (int z = z0; z <= z1; ++z) {
             const double plane = row_plane + n.z * z;
