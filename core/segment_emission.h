@@ -84,9 +84,21 @@ struct NoInitAllocator : std::allocator<T> {
 };
 
 /// Appends `n` bricks with unset values (Brick::NoValues) to `out`, for a producer whose parallel fill then writes
-/// every value (zero where not delivered): zeroing 2 KiB a brick here, on one thread, came before that fill.
+/// every value (zero where not delivered): zeroing 2 KiB a brick here, on one thread, came before that fill. The pages
+/// of the `n` bricks' storage are first touched in parallel (when they span 1 MiB or more) before the bricks are made:
+/// their page faults were the serial part left (0.5 % of a 1-thread armadillo 512^3 half-width 20 run, frame-pointer
+/// profile). Only those pages: a caller that reserved a whole segment keeps growing it chunk by chunk.
 inline void appendUnsetBricks(std::vector<Brick>& out, size_t n) {
   if (out.size() + n > out.capacity()) out.reserve(out.size() + n);
+  constexpr size_t kPage = 4096;
+  const size_t bytes = n * sizeof(Brick);
+  if (bytes >= (size_t(1) << 20)) {
+    // Raw storage past size(): no object lives there yet, so writing its bytes is harmless.
+    char* const fresh = reinterpret_cast<char*>(out.data() + out.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, bytes / kPage, 64), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t p = r.begin(); p != r.end(); ++p) fresh[p * kPage] = 0;
+    });
+  }
   for (size_t i = 0; i < n; ++i) out.emplace_back(Brick::NoValues{});
 }
 

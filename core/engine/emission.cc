@@ -104,7 +104,10 @@ bool emitSegment(BandState& s, const SegmentCallback& cb, int index, double lowe
     appendUnsetBricks(out, outs);  // buildChunk writes every value
     buildChunk(s, c0, c1, slot, keep, max_chunk ? base : 0, out);
     if (last) {
-      for (size_t i = c0; i < c1; ++i) s.table.release(pending[i]);
+      // Distinct bricks: freed in parallel (a serial loop of frees was a serial phase of the last segment).
+      tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 256), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) s.table.release(pending[i]);
+      });
       freed_bytes += (c1 - c0) * sizeof(BrickState);
       if (freed_bytes >= (size_t(64) << 20) && c1 < n) {
         ::malloc_trim(0);  // the freed bricks' pages back before the next chunk's output (the last: below)

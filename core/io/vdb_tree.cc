@@ -83,21 +83,28 @@ template <class T>
 typename VdbTree<T>::Leaf* VdbTree<T>::touchLeaf(const Coord& origin) {
   bool created = false;
   Leaf* leaf = touchLeaf(origin, &created);
-  if (created) fillBackground(leaf);
+  if (created) initLeaf(leaf, origin);
   return leaf;
 }
 
 template <class T>
+void VdbTree<T>::initLeaf(Leaf* leaf, const Coord& origin) const {
+  ::new (static_cast<void*>(leaf)) Leaf{origin, BrickMask{}, {}};
+  leaf->values.fill(background_);
+}
+
+template <class T>
 typename VdbTree<T>::Leaf* VdbTree<T>::touchLeaf(const Coord& origin, bool* created) {
+  static_assert(std::is_trivially_destructible_v<Leaf>, "slabs are freed without destroying their leaves");
   auto [it, inserted] = index_.try_emplace(origin, nullptr);
   *created = inserted;
   if (!inserted) return it->second;
   if (slabs_.empty() || slab_used_ == kSlabLeaves) {
-    slabs_.emplace_back(new Leaf[kSlabLeaves]);  // values left unset: written below, the slab's pages on first use
+    // Raw storage: each leaf is made by initLeaf, on whichever thread fills it.
+    slabs_.emplace_back(static_cast<Leaf*>(::operator new(kSlabLeaves * sizeof(Leaf), std::align_val_t(alignof(Leaf)))));
     slab_used_ = 0;
   }
-  Leaf* leaf = &slabs_.back()[slab_used_++];
-  leaf->origin = origin;
+  Leaf* leaf = slabs_.back().get() + slab_used_++;
   leaves_.push_back(leaf);
   it->second = leaf;
   return leaf;

@@ -6,8 +6,9 @@
 //   * Building: touchLeaf(origin) creates (or finds) the leaf at an 8-aligned origin, its values set to the
 //     background and no voxel active; the caller writes values and sets mask bits (Leaf::mask = active voxels). Leaf
 //     creation is single-threaded; filling distinct leaves from several threads is safe. touchLeaf(origin, &created)
-//     leaves a new leaf's values unset, for the caller to fill with fillBackground() on its own thread (so creating
-//     many leaves at once is not a serial pass over their 2 KiB each).
+//     leaves a new leaf's storage untouched, for the caller to initLeaf() on its own thread (so creating many leaves
+//     at once is not a serial pass over their 2 KiB each, nor over their pages' first-touch faults); until then the
+//     leaf must not be read.
 //   * seal() ends building: leaves are put in OpenVDB's tree order (root children by origin, then table offsets;
 //     the order the file format needs) and the internal nodes' tables are made; afterwards no leaf may be added,
 //     leaves() is in tree order and value() answers. Every internal-node and root tile is inactive.
@@ -23,6 +24,8 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <new>
+#include <type_traits>
 #include <unordered_map>
 #include <vector>
 
@@ -40,7 +43,6 @@ class VdbTree {
 
   struct Leaf {
     Coord origin;
-    uint32_t tag = 0;                       ///< free for a builder's bookkeeping (fits the padding before mask)
     BrickMask mask;                         ///< active voxels (brick order = OpenVDB's leaf order, z fastest)
     std::array<T, kBrickVoxels> values;
   };
@@ -69,7 +71,8 @@ class VdbTree {
 
   Leaf* touchLeaf(const Coord& origin);
   Leaf* touchLeaf(const Coord& origin, bool* created);
-  void fillBackground(Leaf* leaf) const { leaf->values.fill(background_); }
+  /// Makes a leaf from touchLeaf(origin, &created) with created = true: background values, nothing active.
+  void initLeaf(Leaf* leaf, const Coord& origin) const;
   void seal();
   void signedFloodFill();
   bool sealed() const { return sealed_; }
@@ -104,7 +107,10 @@ class VdbTree {
 
   T background_;
   bool sealed_ = false;
-  std::vector<std::unique_ptr<Leaf[]>> slabs_;  // leaves, allocated in slabs
+  struct SlabDelete {
+    void operator()(Leaf* p) const { ::operator delete(p, std::align_val_t(alignof(Leaf))); }
+  };
+  std::vector<std::unique_ptr<Leaf, SlabDelete>> slabs_;  // leaves, allocated in slabs of raw storage
   size_t slab_used_ = 0;
   std::vector<Leaf*> leaves_;
   std::unordered_map<Coord, Leaf*, CoordHash> index_;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <tuple>
 #include <vector>
 
 #include <fmt/format.h>
@@ -70,37 +71,35 @@ void VdbFieldBuilder::add(const Brick& brick) {
 }
 
 void VdbFieldBuilder::add(const SegmentBricks& segment) {
-  // Leaves are created on this thread; filling them is then independent per leaf.
-  // New leaves get their background there too. A segment names each brick once; one that does not (a server is not
-  // trusted) has its repeats applied afterwards on this thread, in order, so no leaf is filled by two threads at once.
-  const size_t n = segment.bricks.size();
-  const uint32_t tag = ++segments_added_;
+  const auto& bricks = segment.bricks;
+  const size_t n = bricks.size();
+  // A segment lists its bricks in (z, y, x) order of origins, each once (Brick's contract); then leaves are created on
+  // this thread (index entries only), and made and filled independently per leaf. A segment that breaks the order
+  // (a server is not trusted) is applied brick by brick on this thread, in its order: no leaf is filled by two threads.
+  auto before = [](const Coord& a, const Coord& b) { return std::tie(a.z, a.y, a.x) < std::tie(b.z, b.y, b.x); };
+  bool ordered = true;
+  for (size_t i = 1; i < n && ordered; ++i) ordered = before(bricks[i - 1].origin, bricks[i].origin);
+  if (!ordered) {
+    for (const Brick& b : bricks) add(b);
+    return;
+  }
   std::vector<VdbTree<float>::Leaf*> leaves(n, nullptr);
   std::vector<uint8_t> created(n, 0);
-  std::vector<size_t> repeats;
   for (size_t i = 0; i < n; ++i) {
-    const Brick& b = segment.bricks[i];
-    if (b.mask.empty()) continue;
+    if (bricks[i].mask.empty()) continue;
     bool is_new = false;
-    VdbTree<float>::Leaf* leaf = distance_.touchLeaf(b.origin, &is_new);
-    if (!is_new && leaf->tag == tag) {
-      repeats.push_back(i);
-      continue;
-    }
-    leaf->tag = tag;
-    leaves[i] = leaf;
+    leaves[i] = distance_.touchLeaf(bricks[i].origin, &is_new);
     created[i] = is_new;
   }
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) {
       if (!leaves[i]) continue;
-      if (created[i]) distance_.fillBackground(leaves[i]);
-      fillLeaf(leaves[i], segment.bricks[i].mask, segment.bricks[i].values);
+      if (created[i]) distance_.initLeaf(leaves[i], bricks[i].origin);
+      fillLeaf(leaves[i], bricks[i].mask, bricks[i].values);
     }
   });
-  for (size_t i : repeats) fillLeaf(distance_.touchLeaf(segment.bricks[i].origin), segment.bricks[i].mask, segment.bricks[i].values);
   if (closest32_ || closest64_)
-    for (const Brick& b : segment.bricks) addClosest(b);
+    for (const Brick& b : bricks) addClosest(b);
 }
 
 void VdbFieldBuilder::setRunState(bool complete, int segments) { run_state_ = {complete, segments}; }

@@ -60,7 +60,6 @@ class VdbFieldBuilder {
   std::unique_ptr<VdbTree<int32_t>> closest32_;  // at most one of the two
   std::unique_ptr<VdbTree<int64_t>> closest64_;
   std::optional<std::pair<bool, int>> run_state_;
-  uint32_t segments_added_ = 0;  // tags the leaves a segment touches (a brick twice in one segment is applied serially)
   bool finished_ = false;
 };
 

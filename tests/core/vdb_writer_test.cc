@@ -154,6 +154,10 @@ TEST(VdbWriterTest, MatchesOpenVdbsOwnFloodFilledTreeBitForBit) {
       if (i % 2) builder.add(bricks[i]);
       else segment.bricks.push_back(bricks[i]);
     }
+    // In (z, y, x) order, as the engine delivers them (the parallel path); unordered segments are applied in order.
+    std::sort(segment.bricks.begin(), segment.bricks.end(), [](const Brick& a, const Brick& b) {
+      return std::tie(a.origin.z, a.origin.y, a.origin.x) < std::tie(b.origin.z, b.origin.y, b.origin.x);
+    });
     builder.add(segment);
     const fs::path path = tempVdb("random");
     ASSERT_EQ(builder.write(path.string()), "");
