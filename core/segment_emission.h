@@ -34,6 +34,7 @@
 
 #include "core/brick.h"
 #include "core/engine.h"
+#include "core/first_touch.h"
 #include "core/grid.h"
 #include "core/interrupter.h"
 
@@ -90,15 +91,7 @@ struct NoInitAllocator : std::allocator<T> {
 /// profile). Only those pages: a caller that reserved a whole segment keeps growing it chunk by chunk.
 inline void appendUnsetBricks(std::vector<Brick>& out, size_t n) {
   if (out.size() + n > out.capacity()) out.reserve(out.size() + n);
-  constexpr size_t kPage = 4096;
-  const size_t bytes = n * sizeof(Brick);
-  if (bytes >= (size_t(1) << 20)) {
-    // Raw storage past size(): no object lives there yet, so writing its bytes is harmless.
-    char* const fresh = reinterpret_cast<char*>(out.data() + out.size());
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, bytes / kPage, 64), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t p = r.begin(); p != r.end(); ++p) fresh[p * kPage] = 0;
-    });
-  }
+  touchPages(out.data() + out.size(), n * sizeof(Brick));  // capacity past size(): no object lives there yet
   for (size_t i = 0; i < n; ++i) out.emplace_back(Brick::NoValues{});
 }
 
