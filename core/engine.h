@@ -72,6 +72,10 @@ struct EngineOptions {
   size_t max_chunk_bricks = 0;               ///< > 0: hand segments over in chunks of at most this many bricks
   /// Also report each delivered voxel's closest feature (Brick::closest; what the ids mean: Seeds::FeatureKind).
   bool closest_features = false;
+  /// Profiling only (bench/scaling_bench: how much parallel work each step holds): called on the run's thread before
+  /// each propagation step with the number of work items it is about to push (front entries; the band's voxels for
+  /// the first step of an exact band). Empty by default.
+  std::function<void(int step, size_t items)> on_step;
 };
 
 struct SegmentStats {

@@ -89,6 +89,7 @@ EngineResult BandRun::run() {
     if (seg == 0 && push_band && !s.stopping()) {
       ++s.step;
       ++stats.steps;
+      if (s.opt.on_step) s.opt.on_step(s.step, s.seeds.band.size());
       stepFromBand(s);
       releaseBand();
       front = gatherFront(s);
@@ -116,6 +117,7 @@ EngineResult BandRun::run() {
       }
       if (++s.step >= kMaxSteps) throw std::runtime_error("distband engine: step limit exceeded");
       ++stats.steps;
+      if (s.opt.on_step) s.opt.on_step(s.step, front.size());
       step(s, front);
       front = gatherFront(s);
     }
