@@ -12,6 +12,9 @@ reads `perf script` output of a 1-thread run of a binary built with frame pointe
 Samples outside the region (process start-up, the peer, reading inputs) are dropped: only chains through one of
 the --region symbols count. Kernel samples (page faults, zeroing pages) are classified by their user-space chain,
 which frame pointers make reliable (the DWARF unwinding used before lost most of them, so it overcounted serial).
+GCC 12 gives leaf functions no frame even with -mno-omit-leaf-frame-pointer, so a sample in a leaf loses the leaf's
+caller: when the frame right above the leaf is inside libtbb, that caller was a TBB task body (our code is entered
+from libtbb only through tasks), and the sample counts as parallel.
 
 Then S(n) = 1 / (s + (1 - s) / n) for n = 2 and 16, the predicted 1 -> 2 speedup to compare with the measured one,
 and the serial symbols that cost most. It is a bound from above: it ignores memory bandwidth, load imbalance inside
@@ -37,8 +40,8 @@ PARALLEL_MARKERS = (
 )
 
 
-def samples(stream):
-    """Yields each sample's frames (symbol names, innermost first)."""
+def samples(stream, with_dso=False):
+    """Yields each sample's frames (symbol names, or (symbol, dso) pairs; innermost first)."""
     frames = []
     in_sample = False
     for line in stream:
@@ -52,9 +55,15 @@ def samples(stream):
             continue
         m = re.match(r"\s+[0-9a-f]+\s+(.*?)\s+\((.*)\)\s*$", line)
         if m:
-            frames.append(m.group(1))
+            frames.append((m.group(1), m.group(2)) if with_dso else m.group(1))
     if in_sample:
         yield frames
+
+
+def called_by_a_task(frames):
+    """The innermost user-space frame's next frame is in libtbb: a frameless leaf called by a task body."""
+    user = [i for i, (_, dso) in enumerate(frames) if "kernel.kallsyms" not in dso]
+    return len(user) >= 2 and "libtbb" in frames[user[1]][1] and "libtbb" not in frames[user[0]][1]
 
 
 def short(symbol):
@@ -73,7 +82,8 @@ def main():
     total = serial = dropped = 0
     serial_leaf = collections.Counter()
     serial_owner = collections.Counter()
-    for frames in samples(sys.stdin):
+    for framed in samples(sys.stdin, with_dso=True):
+        frames = [f for f, _ in framed]
         in_region = [i for i, f in enumerate(frames) if any(r in f for r in args.region)]
         if not in_region:
             dropped += 1
@@ -81,7 +91,7 @@ def main():
         total += 1
         outer = in_region[-1]  # the outermost region frame: everything inside it counts
         inner = frames[:outer + 1]
-        if any(any(m in f for m in PARALLEL_MARKERS) for f in inner):
+        if any(any(m in f for m in PARALLEL_MARKERS) for f in inner) or called_by_a_task(framed):
             continue
         serial += 1
         serial_leaf[short(frames[0])] += 1
