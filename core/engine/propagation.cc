@@ -342,33 +342,30 @@ void step(BandState& s, const FrontList& front) {
 namespace {
 
 // Appends the threads' lists `field` (ThreadBuffers::next or ::deferred) to `to` in thread order, through
-// `each(from, to)` for every entry, the copy split over the workers: on one thread it was a serial phase of every
-// step (it also first-touches fresh pages, ~3 ms a MiB on some virtual machines, and a front at 1024^3 is tens of
-// MB). False when the run must stop; `to` is then partly filled.
-template <typename Each>
-bool gatherLists(BandState& s, FrontList& to, FrontList ThreadBuffers::*field, Each&& each) {
-  std::vector<const FrontList*> lists;
-  std::vector<size_t> at{to.size()};  // list j goes to [at[j], at[j + 1])
-  for (auto& tb : s.buffers)
-    if (!(tb.*field).empty()) {
-      lists.push_back(&(tb.*field));
-      at.push_back(at.back() + (tb.*field).size());
-    }
-  const size_t base = at.front(), n = at.back();
+// `each(from, to)` for every entry, each list's copy split over the workers: on one thread it was a serial phase of
+// every step (it also first-touches fresh pages, ~3 ms a MiB on some virtual machines, and a front at 1024^3 is tens
+// of MB). A list is handed to `done(list)` as soon as it is copied, so a caller that frees it keeps the peak at the
+// new list plus one old one, as the serial append did (all the old lists alive until the end of one parallel copy
+// added 45 MB to a 1024^3 band's peak). False when the run must stop; `to` is then partly filled.
+template <typename Each, typename Done>
+bool gatherLists(BandState& s, FrontList& to, FrontList ThreadBuffers::*field, Each&& each, Done&& done) {
+  size_t n = to.size();
+  for (auto& tb : s.buffers) n += (tb.*field).size();
   to.reserve(n);  // exactly: resize alone may double the capacity
-  to.resize(n);   // uninitialised (FrontAllocator): the loop below writes every new entry
-  tbb::parallel_for(tbb::blocked_range<size_t>(base, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    size_t j = size_t(std::upper_bound(at.begin(), at.end(), r.begin()) - at.begin()) - 1;
-    for (size_t i = r.begin(); i != r.end(); ++j) {  // the part of list j in the range
-      const size_t end = std::min(r.end(), at[j + 1]);
-      const FrontEntry* from = lists[j]->data() + (i - at[j]);
-      for (; i != end; ++i, ++from) {
+  for (auto& tb : s.buffers) {
+    FrontList& list = tb.*field;
+    const size_t base = to.size(), count = list.size();
+    to.resize(base + count);  // uninitialised (FrontAllocator): the loop below writes every new entry
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4096), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i != r.end(); ++i) {
         if (s.stoppingAt(i, 4096)) return;
-        each(*from, to[i]);
+        each(list[i], to[base + i]);
       }
-    }
-  });
-  return !s.stopping();
+    });
+    if (s.stopping()) return false;
+    done(list);
+  }
+  return true;
 }
 
 }  // namespace
@@ -384,15 +381,14 @@ FrontList gatherFront(BandState& s) {
     // (threads clearing the same word all store 0): an atomic AND per entry was ~1/4 of the gather's time.
     b->listed.words[e.offset >> 6].store(0, std::memory_order_relaxed);
     out = {e.brick, e.offset, uint8_t(keyDir(k)), keySite(k)};
+  }, [](FrontList& list) {
+    // A large buffer is given back rather than kept for the next step: the initial band's front can be tens of
+    // MB, and later fronts are mostly much smaller (regrowing costs little next to the pushes that fill it).
+    if (list.capacity() > 65536) FrontList().swap(list);
+    list.clear();
   });
   if (!ok) return FrontList();
   const size_t n = front.size();
-  for (auto& tb : s.buffers) {
-    // A large buffer is given back rather than kept for the next step: the initial band's front can be tens of
-    // MB, and later fronts are mostly much smaller (regrowing costs little next to the pushes that fill it).
-    if (tb.next.capacity() > 65536) FrontList().swap(tb.next);
-    tb.next.clear();
-  }
   // The next front is usually about this one's size: one buffer of that size per thread instead of a chain of
   // doublings, whose freed links would stay behind as heap holes.
   const size_t share = n / std::max<size_t>(1, s.buffers.size()) + 4096;
@@ -401,10 +397,8 @@ FrontList gatherFront(BandState& s) {
 }
 
 bool collectDeferred(BandState& s) {
-  if (!gatherLists(s, s.deferred, &ThreadBuffers::deferred, [](const FrontEntry& e, FrontEntry& out) { out = e; }))
-    return false;
-  for (auto& tb : s.buffers) tb.deferred.clear();
-  return true;
+  return gatherLists(s, s.deferred, &ThreadBuffers::deferred, [](const FrontEntry& e, FrontEntry& out) { out = e; },
+                     [](FrontList& list) { list.clear(); });
 }
 
 FrontList takeDeferred(BandState& s) {
