@@ -46,7 +46,7 @@ namespace distband {
 /// huge pages: their first touches (page faults) and the z pass's strided accesses (TLB misses, a page per slice) were
 /// the largest costs of a whole-grid field after the passes themselves.
 template <class T>
-struct NoInitAllocator : std::allocator<T> {
+struct NoInitAllocator : std::allocator<T>, DefaultInitConstruct {
   static constexpr size_t kHugePage = size_t(2) << 20;
   static constexpr size_t kHugeFrom = size_t(8) << 20;
   template <class U>

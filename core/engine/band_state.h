@@ -20,6 +20,7 @@
 #include "core/engine/band_key.h"
 #include "core/engine/brick_table.h"
 #include "core/engine/link_table.h"
+#include "core/first_touch.h"
 #include "core/geometry.h"
 #include "core/interrupter.h"
 
@@ -42,9 +43,10 @@ struct FrontEntry {
 
 // Allocator of the front lists. Lists of 16 MiB or more are mapped and unmapped directly: glibc would otherwise
 // serve them from its heaps once it has seen large blocks freed, and the holes they leave stay resident while the
-// bricks keep growing. Smaller ones stay on the heap, whose reused pages cost no page faults.
+// bricks keep growing. Smaller ones stay on the heap, whose reused pages cost no page faults. resize() leaves new
+// entries uninitialised (DefaultInitConstruct): the lists are filled by parallel copies right after.
 template <class T>
-struct FrontAllocator {
+struct FrontAllocator : DefaultInitConstruct {
   using value_type = T;
   static constexpr size_t kMapBytes = size_t(16) << 20;
   FrontAllocator() = default;
@@ -61,16 +63,6 @@ struct FrontAllocator {
     const size_t bytes = n * sizeof(T);
     if (bytes < kMapBytes) std::allocator<T>().deallocate(p, n);
     else ::munmap(p, bytes);
-  }
-  // resize() leaves new entries uninitialised: the lists are filled by parallel copies right after (a value-
-  // initialising resize would be a serial pass over fresh pages first).
-  template <class U>
-  void construct(U* p) noexcept {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <class U, class... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
   }
   template <class U>
   bool operator==(const FrontAllocator<U>&) const { return true; }
