@@ -74,14 +74,6 @@ struct NoInitAllocator : std::allocator<T>, DefaultInitConstruct {
     else
       std::free(p);
   }
-  template <class U>
-  void construct(U* p) noexcept {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <class U, class... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
 };
 
 /// Appends `n` bricks with unset values (Brick::NoValues) to `out`, for a producer whose parallel fill then writes
