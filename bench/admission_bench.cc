@@ -31,10 +31,6 @@
 #include "server/request_validation.h"
 #include "tests/support/query_requests.h"
 
-#ifndef DISTBAND_BENCH_DIR
-#define DISTBAND_BENCH_DIR "bench"
-#endif
-
 namespace distband {
 namespace {
 

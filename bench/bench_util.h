@@ -1,4 +1,4 @@
-// Helpers shared by the benchmark programs: the median of timings, peak RSS of this process, running a child
+// Helpers shared by the benchmark programs: a steady clock and seconds since a time point, the median of timings, peak RSS of this process, running a child
 // command, reading the peak RSS that `/usr/bin/time -v` reports for it, and the seed volumes the benches share.
 // Header-only; bench code only.
 #pragma once
@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <optional>
@@ -21,6 +22,11 @@
 #include "core/types.h"
 
 namespace distband::bench {
+
+using Clock = std::chrono::steady_clock;
+
+/// Seconds from `t` to now.
+inline double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 /// Median of a non-empty sample (the mean of the middle two for an even count).
 inline double median(std::vector<double> v) {

@@ -39,15 +39,11 @@
 #include "core/separable_edt.h"
 #include "core/separable_points.h"
 
-#ifndef DISTBAND_BENCH_DIR
-#define DISTBAND_BENCH_DIR "bench"
-#endif
-
 namespace distband {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+using bench::Clock;
+using bench::since;
 
 struct Outcome {
   bool stopped = false;       // interrupted before the end
@@ -188,7 +184,7 @@ int run(int argc, char** argv) {
       chunks_seen = 1 << 30;
       const auto t0 = Clock::now();
       kase.run(capped);
-      full_ms = msSince(t0);
+      full_ms = 1000 * since(t0);
     });
     std::vector<double> latency, returned;
     int stopped = 0;

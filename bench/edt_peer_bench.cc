@@ -34,7 +34,8 @@
 namespace distband {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using bench::Clock;
+using bench::since;
 using bench::median;
 
 struct Case {
@@ -97,7 +98,7 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool pee
     const auto t0 = Clock::now();
     const double cpu0 = processCpuSeconds();
     float* d = edt::binary_edt<uint8_t>(foreground.data(), n, n, n, 1.f, 1.f, 1.f, false, threads);
-    edt_times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+    edt_times.push_back(since(t0));
     edt_cpu.push_back(processCpuSeconds() - cpu0);
     if (r == 0) exact.assign(d, d + mask.size());
     delete[] d;
@@ -138,10 +139,10 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool pee
           exact_count += err <= 1e-4;
           ++voxels;
         }
-      check_s += std::chrono::duration<double>(Clock::now() - c0).count();
+      check_s += since(c0);
     };
     const EngineResult result = computePlannedField(plan, grid, std::move(seeds), &mask, o, consume);
-    times.push_back(std::chrono::duration<double>(Clock::now() - t0).count() - check_s);
+    times.push_back(since(t0) - check_s);
     cpu.push_back(processCpuSeconds() - cpu0 - check_s);
     row.voxels = result.voxels;
     if (check) {

@@ -56,10 +56,6 @@
 #include "bench/bench_util.h"
 #include "tests/support/exact_edt.h"
 
-#ifndef DISTBAND_BENCH_DIR
-#define DISTBAND_BENCH_DIR "bench"
-#endif
-
 namespace distband {
 namespace {
 

@@ -41,15 +41,11 @@
 #include "tests/support/child_server.h"
 #include "tests/support/query_requests.h"
 
-#ifndef DISTBAND_BENCH_DIR
-#define DISTBAND_BENCH_DIR "bench"
-#endif
-
 namespace distband {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+using bench::Clock;
+using bench::since;
 
 v1::QueryRequest pointQuery(int n, std::vector<Vec3d> points, double limit) {
   return pointsRequest(points, {n, n, n}, 1.0, n / 4.0, limit);

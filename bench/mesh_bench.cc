@@ -51,16 +51,12 @@
 
 #include "bench/bench_util.h"
 
-#ifndef DISTBAND_BENCH_DIR
-#define DISTBAND_BENCH_DIR "bench"
-#endif
-
 namespace distband {
 namespace {
 
 using json = nlohmann::json;
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+using bench::Clock;
+using bench::since;
 
 using bench::peakRssMb;
 

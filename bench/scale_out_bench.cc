@@ -27,7 +27,8 @@
 namespace distband {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using bench::Clock;
+using bench::since;
 
 struct Run {
   double seconds = 0;
@@ -52,7 +53,7 @@ Run query(RemoteClient& client, const v1::QueryRequest& request, bool keep_field
   };
   const auto t0 = Clock::now();
   const RemoteQueryResult r = client.query(request, cb);
-  run.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  run.seconds = since(t0);
   if (!r.status.ok()) {
     fmt::print(stderr, "query failed: {}\n", r.status.error_message());
     std::exit(1);

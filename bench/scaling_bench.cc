@@ -33,7 +33,8 @@
 #include "core/seeds/mesh_seeds.h"
 
 using namespace distband;
-using Clock = std::chrono::steady_clock;
+using bench::Clock;
+using bench::since;
 
 namespace {
 
@@ -72,7 +73,7 @@ Run runBand(const TriangleMesh& mesh, const MeshReport& report, const Grid& grid
     throw std::runtime_error(e);
   Clock::time_point engine_end;
   const EngineResult result = computeDistanceField(grid, std::move(seeds), options, [&](SegmentBricks&&) {});
-  run.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  run.seconds = since(t0);
   // The last step runs until its segment's emission (counted there, with the large loops).
   if (!run.steps.empty()) run.steps.pop_back();
   (void)result;

@@ -37,8 +37,8 @@
 namespace distband {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+using bench::Clock;
+using bench::since;
 
 // ---- the server child process ----
 class ServerProcess : public ChildServer {

@@ -41,9 +41,6 @@
 #include "bench/bench_util.h"
 #include "tests/support/vdb_reader.h"
 
-#ifndef DISTBAND_BENCH_DIR
-#define DISTBAND_BENCH_DIR "bench"
-#endif
 #ifndef DISTBAND_CLI_BIN
 #define DISTBAND_CLI_BIN "distband"
 #endif
@@ -56,7 +53,8 @@ namespace {
 
 using json = nlohmann::json;
 using bench::median;
-using Clock = std::chrono::steady_clock;
+using bench::Clock;
+using bench::since;
 
 struct ChildRun {
   double wall_s = 0, cpu_s = 0;
@@ -88,7 +86,7 @@ ChildRun runChild(const std::vector<std::string>& args, const std::string& stdou
   int status = 0;
   rusage ru{};
   wait4(pid, &status, 0, &ru);
-  r.wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  r.wall_s = since(t0);
   r.cpu_s = ru.ru_utime.tv_sec + 1e-6 * ru.ru_utime.tv_usec + ru.ru_stime.tv_sec + 1e-6 * ru.ru_stime.tv_usec;
   r.max_rss_mb = ru.ru_maxrss / 1024.0;
   r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
