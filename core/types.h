@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 
 namespace distband {
@@ -12,6 +13,14 @@ struct Coord {
   int32_t x = 0, y = 0, z = 0;
   friend bool operator==(const Coord&, const Coord&) = default;
   Coord operator+(const Coord& o) const { return {x + o.x, y + o.y, z + o.z}; }
+};
+
+/// Hash of a Coord for unordered containers (sparse trees and meshes keyed by voxel or leaf origin).
+struct CoordHash {
+  size_t operator()(const Coord& c) const {
+    return size_t(uint32_t(c.x)) * 0x9E3779B97F4A7C15ull ^ size_t(uint32_t(c.y)) * 0xC2B2AE3D27D4EB4Full ^
+           size_t(uint32_t(c.z)) * 0x165667B19E3779F9ull;
+  }
 };
 
 /// Double-precision 3-vector used for world and continuous index-space positions.

@@ -32,13 +32,6 @@ struct CellVertex {
   double x, y, z;  // the vertex, index space
 };
 
-struct CoordHash {
-  size_t operator()(const Coord& c) const {
-    return size_t(uint32_t(c.x)) * 0x9E3779B97F4A7C15ull ^ size_t(uint32_t(c.y)) * 0xC2B2AE3D27D4EB4Full ^
-           size_t(uint32_t(c.z)) * 0x165667B19E3779F9ull;
-  }
-};
-
 // The 3x3x3 leaf-sized regions around one leaf: a leaf, or a tile's single value.
 struct Neighbourhood {
   Coord origin;

@@ -93,12 +93,6 @@ class VdbTree {
   T tileValue(bool negative) const { return negative ? T(-background_) : background_; }
 
  private:
-  struct CoordHash {
-    size_t operator()(const Coord& c) const {
-      return size_t(uint32_t(c.x)) * 0x9E3779B97F4A7C15ull ^ size_t(uint32_t(c.y)) * 0xC2B2AE3D27D4EB4Full ^
-             size_t(uint32_t(c.z)) * 0x165667B19E3779F9ull;
-    }
-  };
   T firstValue1(const Node1& n) const;
   T lastValue1(const Node1& n) const;
   T firstValue2(const Node2& n) const;
