@@ -36,32 +36,51 @@ void computeRank(const std::array<uint64_t, kWords>& child, std::array<uint32_t,
   }
 }
 
-// OpenVDB's signed flood fill of one internal node's tiles: a z-scanline walk over the table in x-major order, each
-// tile taking the sign of the last child value met before it (children's last values at scanline starts).
-template <int kLog2, class TableT, class FirstOf, class LastOf>
-void fillTable(TableT& t, FirstOf firstOf, LastOf lastOf) {
+// OpenVDB's signed flood fill rule over one node's (2^kLog2)^3 entries, in x-major order: an entry that is not set
+// (`isSet`) takes the sign of the last set entry met before it on its z scanline, a scanline's start that of its y
+// row's last set entry, a row's start that of its x plane's, and everything before the first set entry the sign
+// `first_inside`. `insideOf(i)` is the sign a set entry passes on (its own value, or a child's last value);
+// `fill(i, inside)` gives an unset entry its sign.
+template <int kLog2, class IsSet, class InsideOf, class Fill>
+void scanlineSignFill(bool first_inside, IsSet isSet, InsideOf insideOf, Fill fill) {
   constexpr int kDim = 1 << kLog2;
-  int first = -1;
-  for (size_t w = 0; w < t.child.size() && first < 0; ++w)
-    if (t.child[w]) first = int(w * 64) + std::countr_zero(t.child[w]);
-  if (first < 0) return;  // nodes exist only with children
-  t.negative.fill(0);
-  bool x_inside = firstOf(first) < 0;
+  bool x_inside = first_inside;
   for (int x = 0; x < kDim; ++x) {
     const int x00 = x << (2 * kLog2);
-    if (t.isChild(x00)) x_inside = lastOf(x00) < 0;
+    if (isSet(x00)) x_inside = insideOf(x00);
     bool y_inside = x_inside;
     for (int y = 0; y < kDim; ++y) {
       const int xy0 = x00 + (y << kLog2);
-      if (t.isChild(xy0)) y_inside = lastOf(xy0) < 0;
+      if (isSet(xy0)) y_inside = insideOf(xy0);
       bool z_inside = y_inside;
       for (int z = 0; z < kDim; ++z) {
         const int xyz = xy0 + z;
-        if (t.isChild(xyz)) z_inside = lastOf(xyz) < 0;
-        else if (z_inside) setBit(t.negative, xyz);
+        if (isSet(xyz)) z_inside = insideOf(xyz);
+        else fill(xyz, z_inside);
       }
     }
   }
+}
+
+// The index of the first set bit of `words`, or -1.
+template <size_t kWords>
+int firstBit(const std::array<uint64_t, kWords>& words) {
+  for (size_t w = 0; w < kWords; ++w)
+    if (words[w]) return int(w * 64) + std::countr_zero(words[w]);
+  return -1;
+}
+
+// An internal node's tiles: children pass on their last value, the first child's first value starts the walk.
+template <int kLog2, class TableT, class FirstOf, class LastOf>
+void fillTable(TableT& t, FirstOf firstOf, LastOf lastOf) {
+  const int first = firstBit(t.child);
+  if (first < 0) return;  // nodes exist only with children
+  t.negative.fill(0);
+  scanlineSignFill<kLog2>(
+      firstOf(first) < 0, [&](int i) { return t.isChild(i); }, [&](int i) { return lastOf(i) < 0; },
+      [&](int i, bool inside) {
+        if (inside) setBit(t.negative, i);
+      });
 }
 
 }  // namespace
@@ -179,30 +198,15 @@ void VdbTree<T>::signedFloodFill() {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves_.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) {
       Leaf& leaf = *leaves_[i];
-      int first = -1;
-      for (size_t w = 0; w < leaf.mask.words.size() && first < 0; ++w)
-        if (leaf.mask.words[w]) first = int(w * 64) + std::countr_zero(leaf.mask.words[w]);
+      T* v = leaf.values.data();
+      const int first = firstBit(leaf.mask.words);
       if (first < 0) {
-        leaf.values.fill(leaf.values[0] < 0 ? inside : outside);
+        leaf.values.fill(v[0] < 0 ? inside : outside);
         continue;
       }
-      T* v = leaf.values.data();
-      bool x_inside = v[first] < 0;
-      for (int x = 0; x < 8; ++x) {
-        const int x00 = x << 6;
-        if (leaf.mask.test(x00)) x_inside = v[x00] < 0;
-        bool y_inside = x_inside;
-        for (int y = 0; y < 8; ++y) {
-          const int xy0 = x00 + (y << 3);
-          if (leaf.mask.test(xy0)) y_inside = v[xy0] < 0;
-          bool z_inside = y_inside;
-          for (int z = 0; z < 8; ++z) {
-            const int xyz = xy0 + z;
-            if (leaf.mask.test(xyz)) z_inside = v[xyz] < 0;
-            else v[xyz] = z_inside ? inside : outside;
-          }
-        }
-      }
+      scanlineSignFill<kLeafLog2>(
+          v[first] < 0, [&](int i) { return leaf.mask.test(i); }, [&](int i) { return v[i] < 0; },
+          [&](int i, bool in) { v[i] = in ? inside : outside; });
     }
   });
   // Tiles are read as +/-background through tileValue(): the flood fill's values, with the outside one positive.
