@@ -170,11 +170,18 @@ struct MeshSigner {
 
   /// `dist` is p's distance to triangle t (voxels), known to float precision.
   bool insidePseudonormal(const Vec3d& p, uint32_t t, double dist) const {
+    const double plane = face_n[t].dot(p - verts[corners[t][0]]);
+    return planeDecides(plane, dist) ? plane < 0 : insideByClosestFeature(p, t);
+  }
+
+  /// When the distance is the plane's (`plane`: p's signed distance to triangle t's plane), the closest point lies in
+  /// the face (up to ~0.5 % of the distance from its border, where any consistent pseudonormal agrees with the face
+  /// normal): the plane's sign is the answer, no region tests needed.
+  static bool planeDecides(double plane, double dist) { return plane * plane >= dist * dist * (1 - 1e-5); }
+
+  /// The pseudonormal test proper: the sign of p against the normal of the feature of triangle t closest to it.
+  bool insideByClosestFeature(const Vec3d& p, uint32_t t) const {
     const auto& c = corners[t];
-    // When the distance is the plane's, the closest point lies in the face (up to ~0.5 % of the distance from its
-    // border, where any consistent pseudonormal agrees with the face normal): no region tests needed.
-    const double plane = face_n[t].dot(p - verts[c[0]]);
-    if (plane * plane >= dist * dist * (1 - 1e-5)) return plane < 0;
     TriangleFeature f;
     const Vec3d cp = closestPointOnTriangle(p, verts[c[0]], verts[c[1]], verts[c[2]], &f);
     Normal3f n;
@@ -190,9 +197,11 @@ struct MeshSigner {
     return n.dot(p - cp) < 0;
   }
 
-  // sign() for pseudonormals: as below, but visiting only the delivered voxels (bit by bit; a thin band's bricks are
-  // mostly undelivered) and keeping the last triangle's plane (a brick's neighbouring voxels mostly share their
-  // closest triangle). Same tests in the same order, so the same signs: ~half of sign()'s instructions.
+  // Pseudonormal signs (closed meshes, whose sign only changes across the surface), visiting only the delivered
+  // voxels (bit by bit; a thin band's bricks are mostly undelivered) and keeping the last triangle's plane (a
+  // brick's neighbouring voxels mostly share their closest triangle). A voxel farther from the surface than the
+  // brick is wide (plus a margin for rounding) sees no surface inside the brick, so one sign test signs every voxel
+  // of it; most bricks beyond a few voxels are like this.
   void signPseudonormal(Brick& brick, const uint32_t* sites) const {
     constexpr double kBrickDiameter = 7 * 1.7320508075688772 + 0.5;
     auto forEachDelivered = [&](auto&& visit) {
@@ -228,11 +237,10 @@ struct MeshSigner {
       const Coord c = brick.origin + brickLocal(i);
       const Vec3d p{double(c.x), double(c.y), double(c.z)};
       const double dist = std::abs(brick.values[i]) / voxel_size;
-      // insidePseudonormal's first test, with the plane kept (the same arithmetic as Normal3f::dot).
+      // insidePseudonormal, with the plane kept (the same arithmetic as Normal3f::dot).
       const Vec3d q = p - v0;
       const double plane = n.x * q.x + n.y * q.y + n.z * q.z;
-      const bool inside =
-          plane * plane >= dist * dist * (1 - 1e-5) ? plane < 0 : insidePseudonormal(p, t, dist);
+      const bool inside = planeDecides(plane, dist) ? plane < 0 : insideByClosestFeature(p, t);
       if (inside) brick.values[i] = -std::abs(brick.values[i]);
       return true;
     });
@@ -240,51 +248,30 @@ struct MeshSigner {
 
   void sign(Brick& brick, const uint32_t* sites) const {
     if (method == SignMethod::kPseudonormal) return signPseudonormal(brick, sites);
+    // Winding number or parity: their sign on an open mesh also changes across its holes, away from the surface, so
+    // no brick is signed by one test. A voxel's distance to the surface is a ball of one sign around it: a later
+    // voxel inside a ball (less a voxel of margin) takes its sign without a query.
     struct Ball {
       Vec3d c;
       double r2;
       bool inside;
     };
-    // Pseudonormal (closed meshes, whose sign only changes across the surface): a voxel farther from the surface
-    // than the brick is wide (plus a margin for rounding) sees no surface inside the brick, so one sign test signs
-    // every voxel of it. Most bricks beyond a few voxels are like this. Not for winding or parity, whose sign on an
-    // open mesh also changes across its holes, away from the surface.
-    constexpr double kBrickDiameter = 7 * 1.7320508075688772 + 0.5;
-    int far = -1;
-    for (int i = 0; i < kBrickVoxels && far < 0 && method == SignMethod::kPseudonormal; ++i)
-      if (brick.mask.test(i) && sites[i] != kNoSite && std::abs(brick.values[i]) > kBrickDiameter * voxel_size)
-        far = i;
-    if (far >= 0) {
-      const Coord c = brick.origin + brickLocal(far);
-      const Vec3d p{double(c.x), double(c.y), double(c.z)};
-      const bool inside =
-          insidePseudonormal(p, triangleOf(sites[far]), std::abs(brick.values[far]) / voxel_size);
-      if (inside)
-        for (int i = 0; i < kBrickVoxels; ++i)
-          if (brick.mask.test(i)) brick.values[i] = -std::abs(brick.values[i]);
-      return;
-    }
     std::vector<Ball> balls;
     for (int i = 0; i < kBrickVoxels; ++i) {
       if (!brick.mask.test(i)) continue;
       const Coord c = brick.origin + brickLocal(i);
       const Vec3d p{double(c.x), double(c.y), double(c.z)};
       bool inside = false;
-      if (method == SignMethod::kPseudonormal) {
-        if (sites[i] == kNoSite) continue;
-        inside = insidePseudonormal(p, triangleOf(sites[i]), std::abs(brick.values[i]) / voxel_size);
-      } else {
-        bool found = false;
-        for (auto it = balls.rbegin(); it != balls.rend(); ++it)
-          if ((p - it->c).lengthSqr() < it->r2) {
-            inside = it->inside, found = true;
-            break;
-          }
-        if (!found) {
-          inside = method == SignMethod::kWinding ? winding->query(p) > 0.5 : parity->inside(p);
-          const double r = std::abs(brick.values[i]) / voxel_size - 1.0;
-          if (r > 0) balls.push_back({p, r * r, inside});
+      bool found = false;
+      for (auto it = balls.rbegin(); it != balls.rend(); ++it)
+        if ((p - it->c).lengthSqr() < it->r2) {
+          inside = it->inside, found = true;
+          break;
         }
+      if (!found) {
+        inside = method == SignMethod::kWinding ? winding->query(p) > 0.5 : parity->inside(p);
+        const double r = std::abs(brick.values[i]) / voxel_size - 1.0;
+        if (r > 0) balls.push_back({p, r * r, inside});
       }
       if (inside) brick.values[i] = -std::abs(brick.values[i]);
     }
