@@ -1,9 +1,10 @@
 // InterruptWatch: bridges a "stop was asked" predicate (the CLI's SIGINT flag, which a signal handler sets and which
 // therefore cannot do more) to core's Interrupter, which the engine and the seed builders poll.
 // Contract: the constructor asks `requested` once itself (a stop asked before the command began is seen whatever the
-// scheduler does; before, a short command could finish before the thread's first poll and ignore it); then, while the
-// watch lives, a thread polls `requested` every 10 ms and cancels interrupter() the first time it returns true. An empty predicate never trips. The destructor wakes and stops the thread at once (it does not wait out
-// a poll period: a finished command exits without that delay). Not copyable.
+// scheduler does; before, a short command could finish before the thread's first poll and ignore it); then, while
+// the watch lives, a thread polls `requested` every 10 ms and cancels interrupter() the first time it returns true.
+// An empty predicate never trips. The destructor wakes and stops the thread at once (it does not wait out a poll
+// period: a finished command exits without that delay). Not copyable.
 #pragma once
 
 #include <chrono>
@@ -19,20 +20,10 @@ namespace distband {
 class InterruptWatch {
  public:
   explicit InterruptWatch(std::function<bool()> requested) : requested_(std::move(requested)) {
-    if (!requested_) return;
-    if (requested_()) {
-      interrupter_.cancel(Status::Code::kCancelled, "interrupted by the user");
-      return;
-    }
+    if (!requested_ || tripped()) return;
     thread_ = std::thread([this] {
       std::unique_lock<std::mutex> lock(mutex_);
-      while (!done_) {
-        if (requested_()) {
-          interrupter_.cancel(Status::Code::kCancelled, "interrupted by the user");
-          return;
-        }
-        wake_.wait_for(lock, std::chrono::milliseconds(10));
-      }
+      while (!done_ && !tripped()) wake_.wait_for(lock, std::chrono::milliseconds(10));
     });
   }
   InterruptWatch(const InterruptWatch&) = delete;
@@ -48,6 +39,13 @@ class InterruptWatch {
   Interrupter& interrupter() { return interrupter_; }
 
  private:
+  /// Asks the predicate; cancels the interrupter when it says stop.
+  bool tripped() {
+    if (!requested_()) return false;
+    interrupter_.cancel(Status::Code::kCancelled, "interrupted by the user");
+    return true;
+  }
+
   std::function<bool()> requested_;
   Interrupter interrupter_;
   std::mutex mutex_;
