@@ -82,7 +82,7 @@ struct NoInitAllocator : std::allocator<T>, DefaultInitConstruct {
 /// their page faults were the serial part left (0.5 % of a 1-thread armadillo 512^3 half-width 20 run, frame-pointer
 /// profile). Only those pages: a caller that reserved a whole segment keeps growing it chunk by chunk.
 inline void appendUnsetBricks(std::vector<Brick>& out, size_t n) {
-  if (out.size() + n > out.capacity()) out.reserve(out.size() + n);
+  out.reserve(out.size() + n);  // no-op when the capacity suffices
   touchPages(out.data() + out.size(), n * sizeof(Brick));  // capacity past size(): no object lives there yet
   for (size_t i = 0; i < n; ++i) out.emplace_back(Brick::NoValues{});
 }

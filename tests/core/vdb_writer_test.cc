@@ -277,7 +277,9 @@ TEST(VdbWriterTest, ABrickTwiceInOneSegmentIsAppliedInOrder) {
   builder.finish();
   for (int k = 0; k < 200; ++k) {
     const Coord origin{8 * (k % 4), 8 * (k / 4 % 4), 0};
-    if (k % kBrickVoxels) EXPECT_EQ(builder.value(origin + brickLocal(k % kBrickVoxels)), float(k) / 100.f);
+    if (k % kBrickVoxels) {
+      EXPECT_EQ(builder.value(origin + brickLocal(k % kBrickVoxels)), float(k) / 100.f);
+    }
   }
   for (int o = 0; o < 16; ++o) {  // voxel 0 of origin o = k % 16: the last k naming it wins
     const int last = o < 8 ? 192 + o : 176 + o;
