@@ -1,10 +1,9 @@
-// Helpers shared by the benchmark programs: a steady clock and seconds since a time point, the median of timings, peak RSS of this process, running a child
-// command, reading the peak RSS that `/usr/bin/time -v` reports for it, and the seed volumes the benches share.
-// Header-only; bench code only.
+// Helpers shared by the benchmark programs: a steady clock and seconds since a time point, the median of timings,
+// peak RSS of this process, running a child command (tests/support/run_command.h), reading the peak RSS that
+// `/usr/bin/time -v` reports for it, and the seed volumes the benches share. Header-only; bench code only.
 #pragma once
 
 #include <sys/resource.h>
-#include <sys/wait.h>
 
 #include <algorithm>
 #include <array>
@@ -20,6 +19,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/types.h"
+#include "tests/support/run_command.h"
 
 namespace distband::bench {
 
@@ -42,17 +42,8 @@ inline double peakRssMb() {
   return ru.ru_maxrss / 1024.0;
 }
 
-/// Runs a shell command, returning its stdout and exit status (-1 if it could not run or did not exit).
-inline std::pair<std::string, int> runCommand(const std::string& cmd) {
-  std::string out;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return {"", -1};
-  std::array<char, 4096> buf{};
-  size_t got;
-  while ((got = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), got);
-  const int status = pclose(p);
-  return {out, WIFEXITED(status) ? WEXITSTATUS(status) : -1};
-}
+/// Runs a shell command, returning its stdout and exit status (tests/support/run_command.h).
+using distband::runCommand;
 
 /// The "Maximum resident set size" of `/usr/bin/time -v` output, in MiB.
 inline std::optional<double> timeVPeakRssMb(const std::string& time_v_output) {

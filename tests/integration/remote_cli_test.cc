@@ -5,8 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-
-#include <sys/wait.h>
+#include <tuple>
 
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
@@ -19,6 +18,7 @@
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
 #include "server/server.h"
+#include "tests/support/run_command.h"
 
 namespace distband {
 namespace {
@@ -228,14 +228,9 @@ TEST(RemoteCliTest, UploadInfoHealth) {
 TEST(RemoteCliTest, TheFrontBinaryHandsServiceCommandsToDistbandRemote) {
   Fixture f;
   auto run = [&](const std::string& args, std::string* out) {
-    const std::string cmd = std::string(DISTBAND_CLI_BINARY) + " " + args + " 2>&1";
-    FILE* p = ::popen(cmd.c_str(), "r");
-    if (!p) return -1;
-    char buf[4096];
-    out->clear();
-    for (size_t n; (n = std::fread(buf, 1, sizeof(buf), p)) > 0;) out->append(buf, n);
-    const int status = ::pclose(p);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    int status;
+    std::tie(*out, status) = runCommand(std::string(DISTBAND_CLI_BINARY) + " " + args + " 2>&1");
+    return status;
   };
   std::string out;
   ASSERT_EQ(run("info --server " + f.address, &out), 0) << out;
