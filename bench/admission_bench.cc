@@ -1,4 +1,4 @@
-// admission_bench: does the server's admission estimate (server/request_validation.cc -> core/field_memory.h)
+// admission_bench: does the server's admission estimate (server/request_validation.cc -> core/field/field_memory.h)
 // stay above what a query really uses? For each case the query is resolved exactly as the server resolves it, then
 // run in a child process through the server's own QueryJob (seeds, engine, encoding, the bounded queue drained by
 // the parent thread), and the child's peak RSS growth during the run is compared with the estimate.

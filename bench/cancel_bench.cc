@@ -3,7 +3,7 @@
 // --max-run-s (a deadline on its Interrupter, so a 1024^3 full-domain run need not finish): its duration T. Then
 // --samples times with a cancel from another thread at a random moment in [2 %, 98 %] of T (seeded, so runs
 // are comparable). Two latencies: "compute stops", from cancel() until the computation has returned (no thread
-// computes for it any more), and "returns", until the call has also freed its state (EngineResult::release_seconds:
+// computes for it any more), and "returns", until the call has also freed its state (FieldRunResult::release_seconds:
 // at 1024^3 that is GBs of bricks, whose release costs time in proportion, not compute).
 //
 //   build/bench/cancel_bench [--resolution 1024] [--threads 2] [--samples 10] [--max-run-s 30] [--cases all|a,b]
@@ -30,14 +30,14 @@
 #include <tbb/task_arena.h>
 
 #include "bench/bench_util.h"
-#include "core/engine.h"
+#include "core/band/band_engine.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
 #include "core/seeds/point_seeds.h"
 #include "core/seeds/volume_seeds.h"
-#include "core/separable_edt.h"
-#include "core/separable_points.h"
+#include "core/separable/volume_edt.h"
+#include "core/separable/point_edt.h"
 
 namespace distband {
 namespace {
@@ -77,10 +77,10 @@ int run(int argc, char** argv) {
 
   TriangleMesh mesh;
   std::string mesh_name = "armadillo.off";
-  if (!loadMesh(mesh_dir + "/" + mesh_name, &mesh, nullptr).empty()) {
+  if (!loadMesh(mesh_dir + "/" + mesh_name, &mesh, nullptr).ok()) {
     mesh_name = "bunny.obj";
-    if (std::string e = loadMesh(mesh_dir + "/" + mesh_name, &mesh, nullptr); !e.empty()) {
-      std::fprintf(stderr, "%s\n", e.c_str());
+    if (Status e = loadMesh(mesh_dir + "/" + mesh_name, &mesh, nullptr); !e.ok()) {
+      std::fprintf(stderr, "%s\n", e.toString().c_str());
       return 1;
     }
   }
@@ -100,19 +100,19 @@ int run(int argc, char** argv) {
       so.limit_voxels = 3;
       so.interrupter = &stop;
       Seeds seeds;
-      return Outcome{makeMeshSeeds(mesh_grid, mesh, so, &seeds) == "interrupted"};
+      return Outcome{makeMeshSeeds(mesh_grid, mesh, so, &seeds).code() == Status::Code::kCancelled};
     };
   };
   auto engine = [&](double segment, double limit, size_t chunk, std::function<bool(const SegmentBricks&)> cancel_in) {
     return [&, segment, limit, chunk, cancel_in](Interrupter& stop) {
       Seeds seeds;
       makePointSeeds(grid, two_points, &seeds);
-      EngineOptions o;
+      BandOptions o;
       o.segment_length_world = segment;
       o.limit_world = limit;
       o.max_chunk_bricks = chunk;
       o.interrupter = &stop;
-      const EngineResult r = computeDistanceField(grid, std::move(seeds), o, [&](SegmentBricks&& s) {
+      const FieldRunResult r = computeBandField(grid, std::move(seeds), o, [&](SegmentBricks&& s) {
         if (cancel_in && cancel_in(s)) {
           self_cancelled = Clock::now();
           stop.cancel();
@@ -124,25 +124,25 @@ int run(int argc, char** argv) {
   auto shellBand = [&](Interrupter& stop) {
     if (shell.empty()) shell = bench::sphereShellMask(n);
     Seeds seeds;
-    if (makeVolumeSeeds(grid, shell, true, &seeds, &stop) == "interrupted") return Outcome{true};
-    EngineOptions o;
+    if (makeVolumeSeeds(grid, shell, true, &seeds, &stop).code() == Status::Code::kCancelled) return Outcome{true};
+    BandOptions o;
     o.limit_world = 5;
     o.interrupter = &stop;
-    const EngineResult r = computeDistanceField(grid, std::move(seeds), o, [](SegmentBricks&&) {});
+    const FieldRunResult r = computeBandField(grid, std::move(seeds), o, [](SegmentBricks&&) {});
     return Outcome{r.interrupted, r.release_seconds * 1000};
   };
-  // The algorithms the planner picks for whole-grid points and volumes (core/separable_points.h, separable_edt.h).
+  // The algorithms the planner picks for whole-grid points and volumes (core/separable/point_edt.h, separable_edt.h).
   auto separablePoints = [&](Interrupter& stop) {
     Seeds seeds;
     makePointSeeds(grid, two_points, &seeds);
-    EngineOptions o;
+    BandOptions o;
     o.max_chunk_bricks = 1024;
     o.interrupter = &stop;
     return Outcome{computeSeparablePointField(grid, seeds, o, [](SegmentBricks&&) {}).interrupted};
   };
   auto separableShell = [&](Interrupter& stop) {
     if (shell.empty()) shell = bench::sphereShellMask(n);
-    EngineOptions o;
+    BandOptions o;
     o.max_chunk_bricks = 1024;
     o.interrupter = &stop;
     return Outcome{computeSeparableVolumeField(grid, shell, true, o, [](SegmentBricks&&) {}).interrupted};

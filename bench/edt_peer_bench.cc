@@ -5,8 +5,8 @@
 //     limited query has to beat.
 //   * distband is timed engine only (seeds built before the clock starts, output bricks dropped), edt whole (it has
 //     no separate setup); each at the thread counts asked, medians of --reps runs, the peer in the same process.
-//   * Rows run with the algorithm the product picks (core's planner: the separable EDTs, core/separable_edt.h for
-//     volumes and core/separable_points.h for the two points) and, unless --compare-band false, again with the active
+//   * Rows run with the algorithm the product picks (core's planner: the separable EDTs, core/separable/volume_edt.h for
+//     volumes and core/separable/point_edt.h for the two points) and, unless --compare-band false, again with the active
 //     band forced (what every volume and point query used before).
 //   * Accuracy: distband against edt's exact result on every delivered voxel (max error in voxels, % exact).
 // The peer's header is read from ../shared/peers/edt (LGPL-3.0): it is built into this program, never copied into
@@ -25,9 +25,9 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/bench_util.h"
-#include "core/engine.h"
-#include "core/field_plan.h"
-#include "core/planned_field.h"
+#include "core/band/band_engine.h"
+#include "core/field/field_plan.h"
+#include "core/field/compute_field.h"
 #include "core/seeds/point_seeds.h"
 #include "core/seeds/volume_seeds.h"
 
@@ -108,16 +108,19 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool pee
 
   std::vector<double> times, cpu;
   for (int r = 0; r < reps; ++r) {
-    Seeds seeds;
+    FieldInputs inputs;
     if (c.as_points) {
-      if (std::string e = makePointSeeds(grid, c.points(n), &seeds); !e.empty()) throw std::runtime_error(e);
+      if (Status e = makePointSeeds(grid, c.points(n), &inputs.seeds); !e.ok()) throw std::runtime_error(e.toString());
     } else if (algorithm == FieldAlgorithm::kBand) {
-      if (std::string e = makeVolumeSeeds(grid, mask, false, &seeds); !e.empty()) throw std::runtime_error(e);
+      if (Status e = makeVolumeSeeds(grid, mask, false, &inputs.seeds); !e.ok())
+        throw std::runtime_error(e.toString());
+    } else {
+      inputs.mask = std::shared_ptr<const std::vector<uint8_t>>(&mask, [](const std::vector<uint8_t>*) {});
     }
     FieldPlan plan;  // the exact mode's plan with the algorithm under test
     plan.seeds = c.as_points ? SeedKind::kPoints : SeedKind::kVolume;
     plan.algorithm = algorithm;
-    EngineOptions o;
+    FieldRunOptions o;
     o.threads = threads;
     o.limit_world = c.limit_voxels;
     o.max_chunk_bricks = 4096;
@@ -141,7 +144,7 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool pee
         }
       check_s += since(c0);
     };
-    const EngineResult result = computePlannedField(plan, grid, std::move(seeds), &mask, o, consume);
+    const FieldRunResult result = computeField(plan, grid, std::move(inputs), o, consume);
     times.push_back(since(t0) - check_s);
     cpu.push_back(processCpuSeconds() - cpu0 - check_s);
     row.voxels = result.voxels;

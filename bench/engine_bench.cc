@@ -9,7 +9,7 @@
 //     per row) and <out-dir>/<tag>.md, rewritten after every row so an interrupted run keeps what it measured.
 //   * Case mode (--case NAME --res N ...): runs one row in this process and prints one JSON line on stdout.
 //     The timed region of a repetition is: build the Seeds from the input, allocate the output, run
-//     computeDistanceField with a callback that consumes every delivered brick (a DenseField, or for the
+//     computeBandField with a callback that consumes every delivered brick (a DenseField, or for the
 //     memory case an analytic check that keeps nothing). peak_rss_mb is getrusage's high-water mark taken
 //     right after the timed repetitions, before any oracle is built.
 //   * Errors are in voxels, against an oracle sharing no code with the engine: brute force over the point list,
@@ -44,11 +44,11 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
-#include "core/dense_field.h"
-#include "core/engine.h"
+#include "core/io/dense_field.h"
+#include "core/band/band_engine.h"
 #include "core/grid.h"
 #include "core/io/npy.h"
-#include "core/seeds.h"
+#include "core/seeds/seeds.h"
 #include "core/seeds/point_seeds.h"
 #include "core/seeds/volume_seeds.h"
 #include "core/stencil.h"
@@ -321,14 +321,14 @@ int runCase(const CaseSpec& spec) {
   }
   const int n = spec.res;
   const Grid grid({0, 0, 0}, 1.0, {n, n, n});
-  EngineOptions opt;
+  BandOptions opt;
   opt.stencil = *stencil;
   opt.mode = mode;
   opt.segment_length_world = spec.segment;
   opt.limit_world = spec.limit;
   opt.threads = spec.threads;
-  if (std::string why = grid.validate() + validateOptions(grid, opt); !why.empty()) {
-    std::cerr << "invalid options: " << why << "\n";
+  if (Status why = validateBandOptions(grid, opt); !why.ok()) {
+    std::cerr << "invalid options: " << why.toString() << "\n";
     return 2;
   }
   const bool memory_case = spec.kase == "sphere_band";
@@ -337,7 +337,7 @@ int runCase(const CaseSpec& spec) {
   if (!memory_case) input = makeInput(spec.kase, n);
 
   std::vector<double> times;
-  EngineResult last;
+  FieldRunResult last;
   std::vector<float> field;  // the last repetition's output (dense cases)
   ErrorStats analytic;       // memory case: checked inside the callback, nothing kept ...
   std::vector<std::pair<Coord, float>> sample;  // ... but a 1-in-64 sample for the exact site-set check
@@ -350,7 +350,7 @@ int runCase(const CaseSpec& spec) {
     max_segment_bricks = 0;
     const auto t0 = std::chrono::steady_clock::now();
     Seeds seeds;
-    std::string err;
+    Status err;
     if (memory_case) {
       seeds = sphereBandSeeds(n, sphere);
     } else if (input.volume) {
@@ -358,14 +358,14 @@ int runCase(const CaseSpec& spec) {
     } else {
       err = makePointSeeds(grid, input.points, &seeds);
     }
-    if (!err.empty()) {
-      std::cerr << "seeds: " << err << "\n";
+    if (!err.ok()) {
+      std::cerr << "seeds: " << err.toString() << "\n";
       return 1;
     }
     band_voxels = seeds.band.size();
     std::optional<DenseField> dense;
     if (!memory_case) dense.emplace(grid, kUndelivered);
-    last = computeDistanceField(grid, seeds, opt, [&](SegmentBricks&& seg) {
+    last = computeBandField(grid, seeds, opt, [&](SegmentBricks&& seg) {
       max_segment_bricks = std::max(max_segment_bricks, seg.bricks.size());
       if (dense) {
         dense->add(seg);
@@ -763,8 +763,8 @@ int runDriver(DriverOptions o) {
       if (!peer_cache.count(input_key)) {
         const Input in = makeInput(s.kase, s.res);
         const std::string mask_path = tmp + "/mask.npy";
-        if (std::string err = writeNpyMask(mask_path, peerMask(in, s.res), {s.res, s.res, s.res}); !err.empty()) {
-          peer_cache[input_key] = json{{"error", err}};
+        if (Status err = writeNpyMask(mask_path, peerMask(in, s.res), {s.res, s.res, s.res}); !err.ok()) {
+          peer_cache[input_key] = json{{"error", err.message()}};
         } else {
           const std::string cmd = fmt::format("{} {} --mask {} --reps {}", shellQuote(o.python),
                                               shellQuote(o.scipy_script), mask_path, s.reps);
@@ -841,7 +841,7 @@ int main(int argc, char** argv) {
   app.add_option("--reps,-R", o.reps, "repetitions per row; the median time is reported")->check(CLI::Range(1, 100));
   app.add_option("--big-reps", o.big_reps, "repetitions for rows at 256^3 and above (default: --reps)")
       ->check(CLI::Range(1, 100));
-  app.add_option("--threads", o.threads, "engine threads (EngineOptions.threads)")->check(CLI::Range(1, 256));
+  app.add_option("--threads", o.threads, "engine threads (BandOptions.threads)")->check(CLI::Range(1, 256));
   app.add_option("--out-dir", o.out_dir, "where <tag>.json and <tag>.md are written");
   app.add_option("--tag", o.tag, "output file name stem (default engine_bench or engine_bench_quick)");
   app.add_option("--python", o.python, "python interpreter with numpy and scipy");

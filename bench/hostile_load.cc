@@ -33,11 +33,11 @@
 
 #include "bench/bench_util.h"
 #include "client/remote_client.h"
-#include "core/dense_field.h"
-#include "core/engine.h"
+#include "core/field/compute_field.h"
+#include "core/io/dense_field.h"
+#include "core/band/band_engine.h"
 #include "server/memory_budget.h"
 #include "server/request_validation.h"
-#include "server/seed_builder.h"
 #include "tests/support/child_server.h"
 #include "tests/support/query_requests.h"
 
@@ -57,12 +57,14 @@ std::vector<float> referenceField(const v1::QueryRequest& request, int threads) 
   AssetCache cache(1 << 20);
   ResolvedQuery q;
   if (!resolveQuery(request, options, cache, nullptr, &q).ok()) return {};
-  Seeds seeds;
-  if (!buildSeeds(q, &seeds).empty()) return {};
+  SeedSource source;
+  source.points = &q.points;
+  FieldInputs inputs;
+  if (!buildFieldInputs(q.plan, q.grid, nullptr, source, nullptr, &inputs).ok()) return {};
   DenseField field(q.grid, float(q.plan.limit_world));
-  EngineOptions eo = q.plan.engineOptions();
-  eo.threads = threads;
-  computeDistanceField(q.grid, std::move(seeds), eo, [&](SegmentBricks&& s) { field.add(s); });
+  FieldRunOptions run = q.plan.runOptions();
+  run.threads = threads;
+  computeField(q.plan, q.grid, std::move(inputs), run, [&](SegmentBricks&& s) { field.add(s); });
   return std::move(field.values());
 }
 

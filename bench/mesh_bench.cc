@@ -6,7 +6,7 @@
 //   * Default (no --case): runs the suites named by --suite (table1, openvdb, fig7, memory; default all but
 //     memory) in this process with one TBB thread budget (--threads, via tbb::global_control; the engine also
 //     runs in a task_arena of that size), and writes <out-dir>/<tag>.json and <tag>.md.
-//   * Timed region, distband: makeMeshSeeds + computeDistanceField (sign included). In the openvdb suite the
+//   * Timed region, distband: makeMeshSeeds + computeBandField (sign included). In the openvdb suite the
 //     timed region also assembles the delivered bricks into a level-set tree of OpenVDB's shape (VdbFieldBuilder + signed
 //     flood fill), the product OpenVDB's call returns; the engine-only time is reported beside it.
 //     Timed region, OpenVDB: meshToSignedDistanceField (float points and indices prepared before the clock).
@@ -41,8 +41,8 @@
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
-#include "core/engine.h"
-#include "core/field_plan.h"
+#include "core/band/band_engine.h"
+#include "core/field/field_plan.h"
 #include "core/io/vdb_writer.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
@@ -93,8 +93,7 @@ struct MeshInput {
 MeshInput loadInput(const Options& o, const std::string& file) {
   MeshInput in;
   in.name = std::filesystem::path(file).stem().string();
-  const std::string error = loadMesh(o.mesh_dir + "/" + file, &in.mesh, &in.report);
-  if (!error.empty()) throw std::runtime_error(error);
+  if (Status e = loadMesh(o.mesh_dir + "/" + file, &in.mesh, &in.report); !e.ok()) throw std::runtime_error(e.toString());
   return in;
 }
 
@@ -103,7 +102,7 @@ Grid gridFor(const TriangleMesh& mesh, int resolution, int padding) {
   MeshGridOptions go;
   go.resolution = resolution;
   go.padding_voxels = padding;
-  if (std::string e = gridForMesh(mesh, go, &g); !e.empty()) throw std::runtime_error(e);
+  if (Status e = gridForMesh(mesh, go, &g); !e.ok()) throw std::runtime_error(e.toString());
   return g;
 }
 
@@ -183,7 +182,7 @@ class SampleProbe {
 struct DistbandRun {
   double seeds_s = 0, engine_s = 0, output_s = 0, total_s = 0;
   int64_t voxels = 0, band_voxels = 0;
-  EngineResult result;
+  FieldRunResult result;
 };
 
 // One distband run. `consume` sees every segment (inside the timed region).
@@ -202,18 +201,18 @@ DistbandRun runDistband(const Grid& grid, const MeshInput& in, MeshSiteMode mode
   request.segment_length_world = segment_vox * grid.voxelSize();
   if (o.second_ring) request.second_ring = true;  // otherwise the engine's default for triangle sites (off)
   FieldPlan plan;
-  if (std::string e = planField(request, grid, &in.report, &plan); !e.empty()) throw std::runtime_error(e);
+  if (Status e = planField(request, grid, &in.report, &plan); !e.ok()) throw std::runtime_error(e.toString());
   const MeshSeedOptions so = plan.meshSeedOptions(grid);
   Seeds seeds;
   MeshSeedStats stats;
-  if (std::string e = makeMeshSeeds(grid, mesh, so, &seeds, &stats); !e.empty()) throw std::runtime_error(e);
+  if (Status e = makeMeshSeeds(grid, mesh, so, &seeds, &stats); !e.ok()) throw std::runtime_error(e.toString());
   run.seeds_s = since(t0);
   run.band_voxels = stats.band_voxels;
-  EngineOptions eo = plan.engineOptions();
+  BandOptions eo = plan.bandOptions(plan.runOptions());
   if (mode != MeshSiteMode::kPaper) eo.mode = o.feature_engine;  // the bench's knob for triangle sites
   eo.threads = o.threads;
   double consume_s = 0;
-  run.result = computeDistanceField(grid, seeds, eo, [&](SegmentBricks&& s) {
+  run.result = computeBandField(grid, seeds, eo, [&](SegmentBricks&& s) {
     const auto tc = Clock::now();
     consume(s);
     consume_s += since(tc);
@@ -295,7 +294,7 @@ json openvdbSuite(const Options& o) {
       MeshGridOptions go;
       go.voxel_size = base.voxelSize();
       go.padding_voxels = hw + 1;
-      if (std::string e = gridForMesh(in.mesh, go, &grid); !e.empty()) throw std::runtime_error(e);
+      if (Status e = gridForMesh(in.mesh, go, &grid); !e.ok()) throw std::runtime_error(e.toString());
       json row = {{"mesh", in.name}, {"res", o.openvdb_resolution}, {"half_width", hw},
                   {"dims", {grid.dims().x, grid.dims().y, grid.dims().z}}, {"threads", o.threads}};
       // distband exact-feature first: its delivered band gives the sample voxels.
@@ -416,7 +415,7 @@ json memoryCase(const Options& o) {
   MeshGridOptions go;
   go.voxel_size = base.voxelSize();
   go.padding_voxels = o.memory_half_width + 1;
-  if (std::string e = gridForMesh(in.mesh, go, &grid); !e.empty()) throw std::runtime_error(e);
+  if (Status e = gridForMesh(in.mesh, go, &grid); !e.ok()) throw std::runtime_error(e.toString());
   const double rss_before = peakRssMb();
   json row = {{"case", o.run_case}, {"mesh", in.name}, {"res", o.memory_resolution},
               {"half_width", o.memory_half_width}, {"threads", o.threads},
@@ -444,7 +443,7 @@ json memoryCase(const Options& o) {
     so.limit_voxels = o.memory_half_width;
     Seeds seeds;
     const auto t0 = Clock::now();
-    if (std::string e = makeMeshSeeds(grid, in.mesh, so, &seeds); !e.empty()) throw std::runtime_error(e);
+    if (Status e = makeMeshSeeds(grid, in.mesh, so, &seeds); !e.ok()) throw std::runtime_error(e.toString());
     row["time_s"] = since(t0);
     row["band_voxels"] = int64_t(seeds.band.size());
   } else if (o.run_case == "memory-openvdb") {

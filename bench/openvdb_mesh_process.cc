@@ -53,12 +53,12 @@ int main(int argc, char** argv) {
 
   distband::TriangleMesh mesh;
   distband::MeshReport report;
-  if (std::string e = distband::loadMesh(mesh_path, &mesh, &report); !e.empty()) return fail(e);
+  if (distband::Status e = distband::loadMesh(mesh_path, &mesh, &report); !e.ok()) return fail(e.toString());
   distband::MeshGridOptions go;
   go.resolution = resolution;
   go.limit_voxels = half_width;
   distband::Grid grid;
-  if (std::string e = distband::gridForMesh(mesh, go, &grid); !e.empty()) return fail(e);
+  if (distband::Status e = distband::gridForMesh(mesh, go, &grid); !e.ok()) return fail(e.toString());
 
   std::vector<openvdb::Vec3s> points;
   std::vector<openvdb::Vec3I> triangles;

@@ -21,7 +21,7 @@
 
 #include "bench/bench_util.h"
 #include "client/remote_client.h"
-#include "core/dense_field.h"
+#include "core/io/dense_field.h"
 #include "tests/support/child_server.h"
 
 namespace distband {

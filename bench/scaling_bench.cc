@@ -3,7 +3,7 @@
 // argued from profiles where no 16-core machine is at hand).
 // Contract:
 //   * Runs the band --reps times at each of --threads (medians of wall seconds, seeds and engine together, output
-//     dropped). At 1 thread it also records each propagation step's work items and wall time (EngineOptions::on_step).
+//     dropped). At 1 thread it also records each propagation step's work items and wall time (BandOptions::on_step).
 //   * The model, for n threads:  T(n) = S + P / n + sum_i W_i / min(n, ceil(items_i / grain_i)),
 //     S = --serial-fraction x T(1) (the serial share measured by bench/serial_fraction.py on a frame-pointer perf
 //     profile of the same run), W_i the steps' times (each step is one parallel loop whose chunks are at least its
@@ -26,8 +26,8 @@
 #include <tbb/global_control.h>
 
 #include "bench/bench_util.h"
-#include "core/engine.h"
-#include "core/field_plan.h"
+#include "core/band/band_engine.h"
+#include "core/field/field_plan.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
@@ -55,10 +55,10 @@ Run runBand(const TriangleMesh& mesh, const MeshReport& report, const Grid& grid
   request.seeds = SeedKind::kMesh;
   request.limit_voxels = half_width;
   FieldPlan plan;
-  if (std::string e = planField(request, grid, &report, &plan); !e.empty()) throw std::runtime_error(e);
+  if (Status e = planField(request, grid, &report, &plan); !e.ok()) throw std::runtime_error(e.toString());
   Run run;
   Clock::time_point last;
-  EngineOptions options = plan.engineOptions();
+  BandOptions options = plan.bandOptions(plan.runOptions());
   options.threads = threads;
   if (record_steps)
     options.on_step = [&](int, size_t items) {
@@ -69,9 +69,9 @@ Run runBand(const TriangleMesh& mesh, const MeshReport& report, const Grid& grid
     };
   const auto t0 = Clock::now();
   Seeds seeds;
-  if (std::string e = makeMeshSeeds(grid, mesh, plan.meshSeedOptions(grid), &seeds); !e.empty())
-    throw std::runtime_error(e);
-  computeDistanceField(grid, std::move(seeds), options, [&](SegmentBricks&&) {});
+  if (Status e = makeMeshSeeds(grid, mesh, plan.meshSeedOptions(grid), &seeds); !e.ok())
+    throw std::runtime_error(e.toString());
+  computeBandField(grid, std::move(seeds), options, [&](SegmentBricks&&) {});
   run.seconds = since(t0);
   // The last step runs until its segment's emission (counted there, with the large loops).
   if (!run.steps.empty()) run.steps.pop_back();
@@ -102,16 +102,16 @@ int main(int argc, char** argv) {
 
   TriangleMesh mesh;
   MeshReport report;
-  if (std::string e = loadMesh(mesh_path, &mesh, &report); !e.empty()) {
-    fmt::print(stderr, "{}\n", e);
+  if (Status e = loadMesh(mesh_path, &mesh, &report); !e.ok()) {
+    fmt::print(stderr, "{}\n", e.toString());
     return 2;
   }
   MeshGridOptions go;
   go.resolution = resolution;
   go.limit_voxels = half_width;
   Grid grid;
-  if (std::string e = gridForMesh(mesh, go, &grid); !e.empty()) {
-    fmt::print(stderr, "{}\n", e);
+  if (Status e = gridForMesh(mesh, go, &grid); !e.ok()) {
+    fmt::print(stderr, "{}\n", e.toString());
     return 2;
   }
 

@@ -28,7 +28,7 @@
 #include "bench/bench_util.h"
 #include "tests/support/child_server.h"
 #include "client/remote_client.h"
-#include "core/engine.h"
+#include "core/band/band_engine.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
@@ -79,7 +79,7 @@ struct Case {
   v1::QueryRequest request;
   Grid grid;   // filled by the in-process side
   Seeds seeds;
-  EngineOptions options;
+  BandOptions options;
   double seed_seconds = 0;
 };
 
@@ -93,15 +93,15 @@ InProcess runInProcess(const Case& c, const TriangleMesh* mesh, const MeshSeedOp
   const auto t0 = Clock::now();
   Seeds seeds;
   if (mesh) {
-    if (std::string e = makeMeshSeeds(c.grid, *mesh, mso, &seeds); !e.empty()) throw std::runtime_error(e);
+    if (Status e = makeMeshSeeds(c.grid, *mesh, mso, &seeds); !e.ok()) throw std::runtime_error(e.toString());
   } else {
     seeds = c.seeds;  // point seeds are trivial (27 voxels); copying them is not timed work of note
   }
-  EngineOptions o = c.options;
+  BandOptions o = c.options;
   o.threads = 0;
   tbb::task_arena arena(threads);
   std::vector<SegmentBricks> kept;  // checksummed after the clock stops: the engine alone is timed
-  arena.execute([&] { computeDistanceField(c.grid, seeds, o, [&](SegmentBricks&& s) { kept.push_back(std::move(s)); }); });
+  arena.execute([&] { computeBandField(c.grid, seeds, o, [&](SegmentBricks&& s) { kept.push_back(std::move(s)); }); });
   r.seconds = since(t0);
   for (const SegmentBricks& s : kept) r.sum.add(s);
   return r;
@@ -165,12 +165,12 @@ int main(int argc, char** argv) {
   bool have_mesh = false;
   std::string mesh_bytes;
   if (!mesh_path.empty()) {
-    if (std::string e = loadMesh(mesh_path, &mesh, nullptr); e.empty()) {
+    if (Status e = loadMesh(mesh_path, &mesh, nullptr); e.ok()) {
       have_mesh = true;
       std::ifstream in(mesh_path, std::ios::binary);
       mesh_bytes.assign(std::istreambuf_iterator<char>(in), {});
     } else {
-      fmt::print(stderr, "skipping the mesh case: {}\n", e);
+      fmt::print(stderr, "skipping the mesh case: {}\n", e.toString());
     }
   }
 

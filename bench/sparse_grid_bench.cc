@@ -1,6 +1,6 @@
 // sparse_grid_bench: memory follows the band at any grid size (issue 11, goal 5). One point seed at the centre of an
 // n^3 grid (voxel size 1, default n = 16384) with a distance limit of L voxels (default 50): seconds per run (median
-// of --reps, whole computeDistanceField call including the brick table's setup and release) and this process's peak
+// of --reps, whole computeBandField call including the brick table's setup and release) and this process's peak
 // RSS. Run it as its own process for a clean peak: it measures nothing else.
 // Prints one JSON line: res, limit, threads, reps, median/min seconds, peak_rss_mb, voxels, bricks and a hash of the
 // delivered bricks (origins, masks, value bits, in delivery order) for comparing builds bit for bit.
@@ -14,7 +14,7 @@
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
-#include "core/engine.h"
+#include "core/band/band_engine.h"
 #include "core/grid.h"
 #include "core/seeds/point_seeds.h"
 
@@ -33,7 +33,7 @@ int main(int argc, char** argv) {
 
   const Grid grid({0, 0, 0}, 1.0, {res, res, res});
   const double c = res / 2 + 0.25;  // off the lattice: no ties on the axes
-  EngineOptions options;
+  BandOptions options;
   options.limit_world = limit;
   options.threads = threads;
   std::vector<double> seconds;
@@ -45,13 +45,13 @@ int main(int argc, char** argv) {
   for (int r = 0; r < reps; ++r) {
     Seeds seeds;
     const auto t0 = std::chrono::steady_clock::now();
-    if (std::string e = makePointSeeds(grid, {{c, c, c}}, &seeds); !e.empty()) {
-      std::fprintf(stderr, "%s\n", e.c_str());
+    if (Status e = makePointSeeds(grid, {{c, c, c}}, &seeds); !e.ok()) {
+      std::fprintf(stderr, "%s\n", e.toString().c_str());
       return 1;
     }
     voxels = bricks = 0;
     const bool first = r == 0;
-    computeDistanceField(grid, std::move(seeds), options, [&](SegmentBricks&& seg) {
+    computeBandField(grid, std::move(seeds), options, [&](SegmentBricks&& seg) {
       for (const Brick& b : seg.bricks) {
         voxels += b.mask.count();
         ++bricks;

@@ -9,7 +9,7 @@
 
 #include <fmt/format.h>
 
-#include "core/dense_field.h"
+#include "core/io/dense_field.h"
 #include "core/io/npy.h"
 #include "core/io/vdb_writer.h"
 
@@ -38,7 +38,7 @@ class NpyBrickSink : public BrickSink {
           if (field_.grid().contains(c)) delivered_[field_.grid().denseIndex(c)] = 1;
         }
   }
-  std::string finish() override {
+  Status finish() override {
     if (sign_from_band_) fillSignsAlongRows();
     return writeNpyFloat32(path_, field_.values(), field_.grid().dims());
   }
@@ -77,7 +77,7 @@ class VdbBrickSink : public BrickSink {
  public:
   VdbBrickSink(std::string path, const FieldLayout& layout) : path_(std::move(path)), builder_(layout.grid, layout.background) {}
   void add(const SegmentBricks& segment) override { builder_.add(segment); }
-  std::string finish() override { return builder_.write(path_); }
+  Status finish() override { return builder_.write(path_); }
   std::string description() const override {
     return fmt::format("{} (OpenVDB level set \"distance\", {} active voxels)", path_, builder_.activeVoxels());
   }
@@ -129,7 +129,7 @@ std::string openBrickSink(const std::string& path, const FieldLayout& layout, st
   const bool npy = endsWith(path, ".npy"), vdb = endsWith(path, ".vdb");
   if (!npy && !vdb) return fmt::format("{}: unsupported output format (supported: .npy, .vdb)", path);
   if (std::string err = checkWritable(path); !err.empty()) return err;
-  if (std::string err = layout.grid.validate(); !err.empty()) return err;
+  if (Status s = layout.grid.validate(); !s.ok()) return s.message();
   if (npy) *out = std::make_unique<NpyBrickSink>(path, layout);
   else *out = std::make_unique<VdbBrickSink>(path, layout);
   return {};

@@ -4,7 +4,8 @@
 // Contract:
 //   * openBrickSink() validates the path (known extension, writable location) before any compute starts and
 //     returns "" or a message naming the path. add() may be called once per delivered segment, in order.
-//     finish() writes the file and returns "" or a message; nothing is written before finish().
+//     finish() writes the file and returns the writer's Status (core/io: kIoError when the OS cannot write the
+//     file, with a message naming it); nothing is written before finish().
 //   * Voxels never delivered hold `background` (the distance limit, or +infinity without one); in a signed
 //     field, undelivered voxels labelled inside hold -background (OpenVDB's convention, negative inside).
 //   * To add a format, implement BrickSink and add one branch to openBrickSink().
@@ -19,6 +20,7 @@
 
 #include "core/brick.h"
 #include "core/grid.h"
+#include "core/status.h"
 
 namespace distband {
 
@@ -36,7 +38,7 @@ class BrickSink {
  public:
   virtual ~BrickSink() = default;
   virtual void add(const SegmentBricks& segment) = 0;
-  virtual std::string finish() = 0;
+  virtual Status finish() = 0;
   /// What finish() writes, for logs: "field.npy (float32, shape (Z, Y, X) = (64, 64, 64))".
   virtual std::string description() const = 0;
 };

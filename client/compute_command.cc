@@ -12,16 +12,14 @@
 #include <tbb/global_control.h>
 
 #include "client/brick_sink.h"
-#include "core/engine.h"
-#include "core/field_plan.h"
-#include "core/planned_field.h"
+#include "core/band/band_engine.h"
+#include "core/field/field_plan.h"
+#include "core/field/compute_field.h"
 #include "core/io/field_metadata.h"
 #include "core/io/npy.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
-#include "core/seeds/point_seeds.h"
-#include "core/seeds/volume_seeds.h"
 
 namespace distband {
 namespace {
@@ -54,10 +52,10 @@ bool parseDouble(std::string_view s, double* out) {
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-/// The seeds and the grid they live on, built from the command's input flags.
+/// The grid, the plan and the algorithm's inputs, built from the command's input flags.
 struct SeedInput {
   Grid grid;
-  Seeds seeds;
+  FieldInputs inputs;
   std::shared_ptr<const std::vector<uint8_t>> mask;  ///< volume input only
   bool signed_distance = false;
   bool mesh = false;
@@ -66,87 +64,87 @@ struct SeedInput {
   GridPadding padding{-1, false};  ///< meshes: the padding used (-1: explicit dims)
 };
 
-std::string buildMeshInput(const ComputeArgs& a, const FieldRequest& field, const Interrupter* interrupter,
-                           SeedInput* in) {
-  if (!a.dims.empty()) return "--dims does not apply to --mesh (use --resolution or --voxel-size)";
+Status buildMeshInput(const ComputeArgs& a, const FieldRequest& field, const Interrupter* interrupter,
+                      SeedInput* in) {
+  auto usage = [](std::string m) { return Status::InvalidArgument(std::move(m)); };
+  if (!a.dims.empty()) return usage("--dims does not apply to --mesh (use --resolution or --voxel-size)");
   if ((a.resolution_given || a.resolution != 0) && a.resolution < 2)
-    return fmt::format("--resolution must be at least 2 voxels (got {})", a.resolution);
-  if ((a.resolution > 0) == a.voxel_size_given) return "--mesh needs exactly one of --resolution N or --voxel-size H";
+    return usage(fmt::format("--resolution must be at least 2 voxels (got {})", a.resolution));
+  if ((a.resolution > 0) == a.voxel_size_given) return usage("--mesh needs exactly one of --resolution N or --voxel-size H");
   if (a.padding < -1 || a.padding > kMaxPaddingVoxels)
-    return fmt::format("--padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, a.padding);
+    return usage(fmt::format("--padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, a.padding));
   TriangleMesh mesh;
   MeshReport report;
-  if (std::string e = loadMesh(a.mesh, &mesh, &report); !e.empty()) return e;
+  if (Status s = loadMesh(a.mesh, &mesh, &report); !s.ok()) return s;
   MeshGridOptions go;
   go.resolution = a.resolution;
   go.voxel_size = a.voxel_size_given ? a.voxel_size : 0;
   if (a.padding >= 0) go.padding_voxels = a.padding;
   go.limit_world = field.limit_world;
   go.limit_voxels = field.limit_voxels;
-  if (std::string e = gridForMesh(mesh, go, &in->grid, &in->padding); !e.empty()) return e;
-  if (std::string e = planField(field, in->grid, &report, &in->plan); !e.empty()) return e;
-  MeshSeedOptions so = in->plan.meshSeedOptions(in->grid);
-  so.interrupter = interrupter;
-  if (std::string e = makeMeshSeeds(in->grid, mesh, so, &in->seeds); !e.empty()) return fmt::format("{}: {}", a.mesh, e);
+  if (Status s = gridForMesh(mesh, go, &in->grid, &in->padding); !s.ok()) return s;
+  if (Status s = planField(field, in->grid, &report, &in->plan); !s.ok()) return s;
+  SeedSource source;
+  source.mesh = &mesh;
+  if (Status s = buildFieldInputs(in->plan, in->grid, nullptr, source, interrupter, &in->inputs); !s.ok())
+    return s.withPrefix(a.mesh);
   in->signed_distance = in->plan.signedField();
   in->mesh = true;
   const Coord d = in->grid.dims();
   in->description = fmt::format("mesh {} ({}; grid {}x{}x{}, padding {}, sites {}, sign {} ({}))", a.mesh,
-                                report.summary(), d.x, d.y, d.z, in->padding.voxels, meshSiteModeName(so.mode),
-                                in->plan.signName(), in->plan.sign_reason);
-  return {};
+                                report.summary(), d.x, d.y, d.z, in->padding.voxels,
+                                meshSiteModeName(in->plan.meshSeedOptions(in->grid).mode), in->plan.signName(),
+                                in->plan.sign_reason);
+  return Status::Ok();
 }
 
-std::string buildSeedInput(const ComputeArgs& a, const FieldRequest& field, const Interrupter* interrupter,
-                           SeedInput* in) {
+Status buildSeedInput(const ComputeArgs& a, const FieldRequest& field, const Interrupter* interrupter,
+                      SeedInput* in) {
+  auto usage = [](std::string m) { return Status::InvalidArgument(std::move(m)); };
   const int sources = int(!a.volume.empty()) + int(!a.points.empty()) + int(!a.mesh.empty());
   if (sources != 1)
-    return "give exactly one seed source: --volume MASK.npy, --points \"x,y,z;...\" or --mesh FILE";
-  if (a.signed_distance && a.volume.empty()) return "--signed needs --volume (meshes take --sign)";
+    return usage("give exactly one seed source: --volume MASK.npy, --points \"x,y,z;...\" or --mesh FILE");
+  if (a.signed_distance && a.volume.empty()) return usage("--signed needs --volume (meshes take --sign)");
   if (!(std::isfinite(a.voxel_size) && a.voxel_size > 0))
-    return fmt::format("--voxel-size must be finite and > 0 (got {})", a.voxel_size);
+    return usage(fmt::format("--voxel-size must be finite and > 0 (got {})", a.voxel_size));
   if (!a.mesh.empty()) return buildMeshInput(a, field, interrupter, in);
-  if (a.resolution != 0) return "--resolution applies to --mesh only";
+  if (a.resolution != 0) return usage("--resolution applies to --mesh only");
   in->signed_distance = a.signed_distance;
   Vec3d origin;
-  if (std::string e = parseVec3(a.origin, "--origin", &origin); !e.empty()) return e;
+  if (std::string e = parseVec3(a.origin, "--origin", &origin); !e.empty()) return usage(e);
   const double voxel_size = a.voxel_size;
   Coord dims{};
   const bool have_dims = !a.dims.empty();
   if (have_dims)
-    if (std::string e = parseDims(a.dims, &dims); !e.empty()) return e;
+    if (std::string e = parseDims(a.dims, &dims); !e.empty()) return usage(e);
+  SeedSource source;
+  std::vector<Vec3d> points;
+  FieldRequest request = field;
   if (!a.volume.empty()) {
     auto mask = std::make_shared<std::vector<uint8_t>>();
     Coord mask_dims;
-    if (std::string e = readNpyMask(a.volume, mask.get(), &mask_dims); !e.empty()) return e;
+    if (Status s = readNpyMask(a.volume, mask.get(), &mask_dims); !s.ok()) return s;
     if (have_dims && !(dims == mask_dims))
-      return fmt::format("--dims {}x{}x{} disagrees with {} of shape (Z, Y, X) = ({}, {}, {})", dims.x, dims.y, dims.z,
-                         a.volume, mask_dims.z, mask_dims.y, mask_dims.x);
-    in->grid = Grid(origin, voxel_size, mask_dims);
-    if (std::string e = in->grid.validate(); !e.empty()) return e;
-    if (std::string e = planField(field, in->grid, nullptr, &in->plan); !e.empty()) return e;
-    if (in->plan.algorithm == FieldAlgorithm::kSeparable) {  // the separable EDT reads the mask itself
-      if (std::string e = checkSeedMask(*mask, in->plan.inside_negative); !e.empty())
-        return fmt::format("{}: {}", a.volume, e);
-    } else if (std::string e = makeVolumeSeeds(in->grid, *mask, in->plan.inside_negative, &in->seeds, interrupter); !e.empty())
-      return fmt::format("{}: {}", a.volume, e);
-    in->mask = mask;
+      return usage(fmt::format("--dims {}x{}x{} disagrees with {} of shape (Z, Y, X) = ({}, {}, {})", dims.x, dims.y,
+                               dims.z, a.volume, mask_dims.z, mask_dims.y, mask_dims.x));
+    dims = mask_dims;
+    source.mask = in->mask = mask;
     in->description = fmt::format("volume {} ({}x{}x{}, {})", a.volume, mask_dims.x, mask_dims.y, mask_dims.z,
                                   a.signed_distance ? "signed" : "unsigned");
-    return {};
+  } else {
+    if (!have_dims) return usage("--points needs --dims X,Y,Z");
+    if (std::string e = parsePointList(a.points, &points); !e.empty()) return usage(e);
+    request.point_layout = pointLayout(points);  // the planner's cost model
+    source.points = &points;
+    in->description = fmt::format("{} point{} in {}x{}x{}", points.size(), points.size() == 1 ? "" : "s", dims.x,
+                                  dims.y, dims.z);
   }
-  if (!have_dims) return "--points needs --dims X,Y,Z";
-  std::vector<Vec3d> points;
-  if (std::string e = parsePointList(a.points, &points); !e.empty()) return e;
   in->grid = Grid(origin, voxel_size, dims);
-  if (std::string e = in->grid.validate(); !e.empty()) return e;
-  FieldRequest point_field = field;
-  point_field.point_layout = pointLayout(points);  // the planner's cost model
-  if (std::string e = planField(point_field, in->grid, nullptr, &in->plan); !e.empty()) return e;
-  if (std::string e = makePointSeeds(in->grid, points, &in->seeds); !e.empty()) return "--points: " + e;
-  in->description = fmt::format("{} point{} in {}x{}x{}", points.size(), points.size() == 1 ? "" : "s", dims.x,
-                                dims.y, dims.z);
-  return {};
+  if (Status s = in->grid.validate(); !s.ok()) return s;
+  if (Status s = planField(request, in->grid, nullptr, &in->plan); !s.ok()) return s;
+  if (Status s = buildFieldInputs(in->plan, in->grid, nullptr, source, interrupter, &in->inputs); !s.ok())
+    return s.withPrefix(a.volume.empty() ? std::string("--points") : a.volume);
+  return Status::Ok();
 }
 
 std::string rangeText(int index, double lower, double upper) {
@@ -250,17 +248,17 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
 
   InterruptWatch watch(ctx.interrupted);
   SeedInput in;
-  if (std::string e = buildSeedInput(a, field, &watch.interrupter(), &in); !e.empty()) {
-    if (watch.interrupter().interrupted()) {
+  if (Status s = buildSeedInput(a, field, &watch.interrupter(), &in); !s.ok()) {
+    if (s.code() == Status::Code::kCancelled) {
       ctx.err << "distband compute: interrupted; nothing written\n";
       return kExitInterrupted;
     }
-    return usage(e);
+    return usage(s.message());
   }
   const double limit = in.plan.limit_world;  // world units, whichever unit the flag used
-  EngineOptions options = in.plan.engineOptions();
+  FieldRunOptions options = in.plan.runOptions();
   options.threads = a.threads;
-  if (std::string e = validateOptions(in.grid, options); !e.empty()) return usage(e);
+  if (Status s = validateRunOptions(in.grid, options); !s.ok()) return usage(s.message());
   if (in.padding.band_clipped)
     ctx.err << "distband compute: " << clippedBandWarning(in.padding.voxels, limit / in.grid.voxelSize(), a.padding >= 0)
             << "\n";
@@ -273,7 +271,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   description.inside = in.mask;
   description.sign_from_band = in.mesh && in.signed_distance;
   description.stencil = std::string(stencilName(stencil));
-  description.mode = std::string(modeName(options.mode));
+  description.mode = std::string(modeName(in.plan.mode));
   if (in.signed_distance) description.sign = std::string(in.plan.signName());
   description.sign_reason = in.plan.sign_reason;
   description.padding_voxels = in.padding.voxels;
@@ -293,7 +291,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
                                                ? "algorithm separable (exact EDT over the bricks within the limit)"
                                                : "algorithm separable (exact EDT over the whole grid)")
                              : fmt::format("stencil {}", stencilName(stencil)),
-                         modeName(options.mode),
+                         modeName(in.plan.mode),
                          a.segment > 0 ? fmt::format("{:g}", a.segment) : std::string("none"),
                          std::isfinite(limit) ? fmt::format("{:g}", limit) : std::string("none"),
                          a.threads > 0 ? std::to_string(a.threads) : std::string("all"));
@@ -302,7 +300,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   options.interrupter = &watch.interrupter();
   auto t_segment = Clock::now();
   int64_t committed_voxels = 0;
-  EngineResult result;
+  FieldRunResult result;
   try {
     auto consume = [&](SegmentBricks&& seg) {
       int64_t voxels = 0;
@@ -318,7 +316,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
       if (complete) outputs.commitSegment(upper);
       committed_voxels += voxels;
     };
-    result = computePlannedField(in.plan, in.grid, std::move(in.seeds), in.mask.get(), options, consume);
+    result = computeField(in.plan, in.grid, std::move(in.inputs), options, consume);
   } catch (const std::invalid_argument& e) {
     return usage(e.what());
   } catch (const std::exception& e) {

@@ -75,7 +75,7 @@ std::string checkOutputFlags(const OutputFlags& f, double limit_world, OutputPla
   const bool finite_limit = limit_in_voxels || std::isfinite(limit_world);
   if (!f.slice_png.empty()) {
     if (f.slice_png.size() != 2) return "--slice-png takes AXIS:INDEX and a PNG path";
-    if (std::string e = parseSliceSpec(f.slice_png[0], &p.slice); !e.empty()) return "--slice-png: " + e;
+    if (Status s = parseSliceSpec(f.slice_png[0], &p.slice); !s.ok()) return "--slice-png: " + s.message();
     if (std::string e = checkOutputPath("--slice-png", f.slice_png[1], {".png"}); !e.empty()) return e;
     if (!finite_limit) return "--slice-png needs a finite --limit or --limit-voxels (the colour scale's range)";
     files.emplace_back("--slice-png", f.slice_png[1]);
@@ -114,7 +114,7 @@ std::string FieldOutputs::open(const FieldDescription& field) {
   field_ = field;
   const OutputFlags& f = plan_.flags;
   if (!f.slice_png.empty())
-    if (std::string e = resolveSlice(field.grid, &plan_.slice); !e.empty()) return "--slice-png: " + e;
+    if (Status s = resolveSlice(field.grid, &plan_.slice); !s.ok()) return "--slice-png: " + s.message();
   if (!f.isosurface.empty() && !(std::abs(plan_.isosurface) < field.limit_world))
     return fmt::format("--isosurface {:g}: the surface must lie inside the limit {:g} (beyond it the field holds "
                        "only the background)",
@@ -163,7 +163,7 @@ void FieldOutputs::build(const SegmentBricks& batch) {
   }
 }
 
-std::string FieldOutputs::writeClosest() {
+Status FieldOutputs::writeClosest() {
   const std::string& path = plan_.flags.closest;
   if (field_.closest_feature == "voxel") return writeNpyInt64(path, closest_, field_.grid.dims());
   std::vector<int32_t> ids(closest_.begin(), closest_.end());  // triangle and point ids are < 2^27
@@ -181,17 +181,17 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
   if (!run.complete && segments_ == 0) return "no segment was complete yet: nothing written";
   const OutputFlags& f = plan_.flags;
   const double up_to = run.complete ? field_.limit_world : complete_up_to_;
-  std::string first_error;
-  auto report = [&](const std::string& error, const std::string& line) {
-    if (!error.empty()) {
-      if (first_error.empty()) first_error = error;
+  Status first_error;
+  auto report = [&](const Status& status, const std::string& line) {
+    if (!status.ok()) {
+      if (first_error.ok()) first_error = status;
     } else if (lines) {
       lines->push_back(line);
     }
   };
   if (npy_) {
-    const std::string e = npy_->finish();
-    report(e, "wrote " + npy_->description());
+    const Status s = npy_->finish();
+    report(s, "wrote " + npy_->description());
   }
   if (vdb_) {
     vdb_->setRunState(run.complete, segments_);
@@ -214,8 +214,8 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
       TriangleMeshF mesh;
       IsosurfaceOptions io;
       io.distance_world = plan_.isosurface;
-      const std::string e = writeIsosurfaceObj(f.isosurface[1], vdb_->distance(), vdb_->grid(), io, &mesh);
-      report(e, fmt::format("wrote {} (isosurface at {:g}: {} vertices, {} triangles)", f.isosurface[1],
+      const Status s = writeIsosurfaceObj(f.isosurface[1], vdb_->distance(), vdb_->grid(), io, &mesh);
+      report(s, fmt::format("wrote {} (isosurface at {:g}: {} vertices, {} triangles)", f.isosurface[1],
                             plan_.isosurface, mesh.vertices.size(), mesh.triangles.size()));
     }
   }
@@ -251,7 +251,7 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
     report(writeFieldMetadata(meta_path, meta),
            fmt::format("wrote {} (metadata{})", meta_path, run.complete ? "" : ", complete=false"));
   }
-  return first_error;
+  return first_error.message();  // the commands deal in messages; "" when every file was written
 }
 
 }  // namespace distband

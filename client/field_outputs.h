@@ -12,8 +12,10 @@
 //     nothing of a half-delivered one. Peak memory: the builders plus the open segment's bricks.
 //   * finish() writes every file atomically (a temporary beside the target, renamed over it): the field (.npy or
 //     .vdb), the closest-feature ids (.npy: int32 for triangles and points, int64 for voxels; -1 where nothing
-//     was delivered; or, with --closest naming --out's .vdb, an Int32Grid/Int64Grid "closest" in that file), the metadata JSON, the slice PNG and the isosurface OBJ. It returns the first error; `lines`
-//     gets one "wrote ..." line per file. When the run is incomplete and no --meta was given, the metadata is
+//     was delivered; or, with --closest naming --out's .vdb, an Int32Grid/Int64Grid "closest" in that file), the
+//     metadata JSON, the slice PNG and the isosurface OBJ. It returns the first error's message ("" when every
+//     file was written; the writers' Status codes stay inside, the commands take messages); `lines` gets one
+//     "wrote ..." line per file. When the run is incomplete and no --meta was given, the metadata is
 //     written beside the field anyway (FIELD.json): an incomplete field must not pass for a complete one.
 // Not thread-safe: one caller.
 #pragma once
@@ -27,6 +29,7 @@
 #include "core/brick.h"
 #include "core/grid.h"
 #include "core/io/slice_png.h"
+#include "core/status.h"
 
 namespace CLI {
 class App;
@@ -101,7 +104,7 @@ class FieldOutputs {
 
  private:
   void build(const SegmentBricks& batch);
-  std::string writeClosest();
+  Status writeClosest();
 
   OutputPlan plan_;
   FieldDescription field_;

@@ -178,7 +178,7 @@ RemoteQueryResult RemoteClient::query(const v1::QueryRequest& request, const Rem
         result.grid = gridFromHeader(reply.header());
         encoding = reply.header().encoding();
         closest = reply.header().closest_feature();
-        if (std::string e = result.grid.validate(); !e.empty()) protocol_error = "header grid: " + e;
+        if (Status s = result.grid.validate(); !s.ok()) protocol_error = "header grid: " + s.message();
         else if (!v1::ClosestFeature_IsValid(closest))
           protocol_error = fmt::format("header closest_feature {} is not a ClosestFeature value", int(closest));
         else if (cb.on_header) go_on = cb.on_header(result.grid, result.header);

@@ -136,7 +136,7 @@ std::string buildRequest(const QueryArgs& a, RemoteClient& client, const CliCont
   } else if (!a.volume.empty()) {
     std::vector<uint8_t> mask;
     Coord dims;
-    if (std::string e = readNpyMask(a.volume, &mask, &dims); !e.empty()) return e;
+    if (Status s = readNpyMask(a.volume, &mask, &dims); !s.ok()) return s.message();
     v1::UploadReply up;
     *status = client.uploadVolume(dims, mask, a.volume, &up);
     if (!status->ok()) return {};
@@ -442,8 +442,8 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
             } else {
               std::vector<uint8_t> mask;
               Coord dims;
-              if (std::string e = readNpyMask(args->volume, &mask, &dims); !e.empty()) {
-                ctx.err << "distband upload: " << e << "\n";
+              if (Status e = readNpyMask(args->volume, &mask, &dims); !e.ok()) {
+                ctx.err << "distband upload: " << e.message() << "\n";
                 return kExitUsage;
               }
               s = client.uploadVolume(dims, mask, args->volume, &up);

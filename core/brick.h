@@ -46,7 +46,7 @@ struct Brick {
   Coord origin;
   std::array<float, kBrickVoxels> values;  // zero from Brick(), unset from Brick(NoValues)
   BrickMask mask;
-  /// Closest-feature ids of the masked voxels (EngineOptions::closest_features; see Seeds::FeatureKind), indexed
+  /// Closest-feature ids of the masked voxels (BandOptions::closest_features; see Seeds::FeatureKind), indexed
   /// like `values`; empty when not requested.
   std::vector<int64_t> closest;
 };
@@ -58,7 +58,7 @@ struct SegmentBricks {
   double lower_world = 0;      ///< |distance| range of the voxels delivered: (lower, upper]; segment 0 includes 0
   double upper_world = 0;
   bool last = false;           ///< true for the final segment of a completed run (on its complete chunk)
-  bool complete = true;        ///< false on all but the last chunk of a segment (EngineOptions::max_chunk_bricks)
+  bool complete = true;        ///< false on all but the last chunk of a segment (BandOptions::max_chunk_bricks)
   std::vector<Brick> bricks;   ///< sorted by origin (z, y, x), one entry per brick with delivered voxels
 };
 

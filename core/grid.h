@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <string>
 
+#include "core/status.h"
 #include "core/types.h"
 
 namespace distband {
@@ -83,8 +84,8 @@ class Grid {
   Grid window(const VoxelBox& box) const { return Grid(worldOf(box.min), voxel_size_, box.dims); }
   VoxelBox box() const { return {{}, dims_}; }
 
-  /// Empty string when usable, otherwise why not (dims out of range, non-finite or non-positive voxel size).
-  std::string validate() const;
+  /// OK when usable, otherwise kInvalidArgument saying why (dims out of range, non-finite or non-positive voxel size).
+  Status validate() const;
 
  private:
   Vec3d origin_{};

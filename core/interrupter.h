@@ -72,4 +72,11 @@ class Interrupter {
 /// Null-safe poll: a null interrupter is never interrupted.
 inline bool isInterrupted(const Interrupter* interrupter) { return interrupter && interrupter->interrupted(); }
 
+/// What a phase that stopped because `interrupter` tripped returns: its status (kCancelled, kDeadlineExceeded, ...),
+/// or kCancelled when there is no interrupter (a phase stopped by other means, e.g. a cancelled TBB context).
+inline Status interruptedStatus(const Interrupter* interrupter) {
+  if (interrupter && interrupter->interrupted()) return interrupter->status();
+  return Status::Cancelled("the work was cancelled");
+}
+
 }  // namespace distband

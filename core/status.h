@@ -6,7 +6,10 @@
 //     kNotFound (a named thing does not exist), kResourceExhausted (a limit or budget of this process: ask for
 //     less or retry later), kCancelled (the caller gave up), kDeadlineExceeded (the caller's time ran out),
 //     kUnavailable (the process is shutting down: retry elsewhere), kUnauthenticated (no valid credentials),
-//     kInternal (a bug or an environment failure; never caused by input).
+//     kIoError (a local file could not be read or written: the disk, its permissions; the CLI's files only — the
+//     server opens no file because of a request), kInternal (a bug or an environment failure; never caused by input).
+//   * Exceptions are for broken preconditions (a caller's bug), never for input: every core function that can fail
+//     because of its input returns a Status.
 //   * The server maps codes to gRPC codes in exactly one place (server/grpc_status.h); core never sees gRPC.
 // Plain value type; copyable; not synchronised.
 #pragma once
@@ -28,6 +31,7 @@ class [[nodiscard]] Status {
     kDeadlineExceeded,
     kUnavailable,
     kUnauthenticated,
+    kIoError,
     kInternal,
   };
 
@@ -42,6 +46,7 @@ class [[nodiscard]] Status {
   static Status DeadlineExceeded(std::string m) { return {Code::kDeadlineExceeded, std::move(m)}; }
   static Status Unavailable(std::string m) { return {Code::kUnavailable, std::move(m)}; }
   static Status Unauthenticated(std::string m) { return {Code::kUnauthenticated, std::move(m)}; }
+  static Status IoError(std::string m) { return {Code::kIoError, std::move(m)}; }
   static Status Internal(std::string m) { return {Code::kInternal, std::move(m)}; }
 
   bool ok() const { return code_ == Code::kOk; }
@@ -67,6 +72,7 @@ class [[nodiscard]] Status {
       case Code::kDeadlineExceeded: return "DEADLINE_EXCEEDED";
       case Code::kUnavailable: return "UNAVAILABLE";
       case Code::kUnauthenticated: return "UNAUTHENTICATED";
+      case Code::kIoError: return "IO_ERROR";
       case Code::kInternal: return "INTERNAL";
     }
     return "UNKNOWN";

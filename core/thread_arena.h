@@ -1,4 +1,4 @@
-// runWithThreads: the thread-count rule of the compute entry points (EngineOptions::threads) in one place — a
+// runWithThreads: the thread-count rule of the compute entry points (BandOptions::threads) in one place — a
 // positive count runs `body` in a TBB task_arena of that many workers, anything else in the caller's arena.
 #pragma once
 

@@ -1,16 +1,23 @@
 // Fuzz target: the .npy reader (core/io/npy.h) on arbitrary bytes. On success the parsed array must be consistent:
-// payload size = prod(shape) * item size, rank 3 shapes within the grid limits for masks.
+// payload size = prod(shape) * item size, rank 3 shapes within the grid limits for masks. On failure the Status must
+// say the bytes are malformed (kInvalidArgument) or over a hard limit (kResourceExhausted), naming the input.
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <string_view>
 
 #include "core/io/npy.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   distband::NpyArray array;
-  const std::string error =
+  const distband::Status status =
       distband::parseNpy(std::string_view(reinterpret_cast<const char*>(data), size), "fuzz.npy", &array);
-  if (!error.empty()) return 0;
+  if (!status.ok()) {
+    using Code = distband::Status::Code;
+    if (status.code() != Code::kInvalidArgument && status.code() != Code::kResourceExhausted) __builtin_trap();
+    if (status.message().find("fuzz.npy") == std::string::npos) __builtin_trap();
+    return 0;
+  }
   uint64_t elements = 1;
   for (int64_t extent : array.shape) {
     if (extent < 0) __builtin_trap();

@@ -18,7 +18,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "core/band_extent.h"
+#include "core/field/band_extent.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/types.h"
 

@@ -12,7 +12,7 @@
 #include <grpcpp/grpcpp.h>
 #include <spdlog/spdlog.h>
 
-#include "core/engine.h"
+#include "core/band/band_engine.h"
 #include "server/asset_parsing.h"
 #include "server/grpc_status.h"
 #include "server/query_job.h"

@@ -12,6 +12,7 @@ grpc::StatusCode toGrpcCode(Status::Code code) {
     case Status::Code::kDeadlineExceeded: return grpc::StatusCode::DEADLINE_EXCEEDED;
     case Status::Code::kUnavailable: return grpc::StatusCode::UNAVAILABLE;
     case Status::Code::kUnauthenticated: return grpc::StatusCode::UNAUTHENTICATED;
+    case Status::Code::kIoError:  // the server opens no file because of a request: a failure of its own
     case Status::Code::kInternal: return grpc::StatusCode::INTERNAL;
   }
   return grpc::StatusCode::INTERNAL;

@@ -7,9 +7,8 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-#include "core/planned_field.h"
+#include "core/field/compute_field.h"
 #include "proto/brick_codec.h"
-#include "server/seed_builder.h"
 
 namespace distband {
 namespace {
@@ -45,31 +44,33 @@ void QueryJob::join() {
 void QueryJob::run() {
   try {
     arena_->execute([&] {
-      EngineOptions options = query_.plan.engineOptions();
+      FieldRunOptions options = query_.plan.runOptions();
       options.threads = 0;  // the shared arena we are executing in
       options.interrupter = interrupter_;
       options.max_chunk_bricks = kQueryChunkBricks;
-      const bool volume_mask = query_.plan.algorithm == FieldAlgorithm::kSeparable &&
-                               query_.plan.seeds == SeedKind::kVolume;  // the separable EDT reads the mask itself
-      Seeds seeds;
-      if (!volume_mask) {
-        const auto t0 = Clock::now();
-        const std::string e = buildSeeds(query_, &seeds, interrupter_);
-        seed_seconds_ = secondsBetween(t0, Clock::now());
-        if (interrupter_->interrupted()) {
-          result_.interrupted = true;
-          return;
-        }
-        if (!e.empty()) {
-          // Every rule a request can break was checked before compute: what fails here is the server's fault.
-          status_ = Status::Internal("seeds: " + e);
-          return;
-        }
+      SeedSource source;
+      source.points = &query_.points;
+      if (query_.asset) {
+        source.mask = query_.asset->mask;  // a tile's volume covers its window (checked by resolveQuery)
+        source.mesh = query_.asset->mesh.get();
+      }
+      FieldInputs inputs;
+      const auto t0 = Clock::now();
+      const Status built = buildFieldInputs(query_.plan, query_.grid, query_.tile ? &query_.tile->window : nullptr,
+                                            source, interrupter_, &inputs);
+      seed_seconds_ = secondsBetween(t0, Clock::now());
+      if (interrupter_->interrupted()) {
+        result_.interrupted = true;
+        return;
+      }
+      if (!built.ok()) {
+        // Every rule a request can break was checked before compute: what fails here is the server's fault.
+        status_ = Status::Internal("seeds: " + built.message());
+        return;
       }
       segment_started_ = Clock::now();
-      result_ = computePlannedField(query_.plan, query_.engineGrid(), std::move(seeds),
-                                    volume_mask ? query_.asset->mask.get() : nullptr, options,
-                                    [this](SegmentBricks&& s) { emitChunk(std::move(s)); });
+      result_ = computeField(query_.plan, query_.engineGrid(), std::move(inputs), options,
+                             [this](SegmentBricks&& s) { emitChunk(std::move(s)); });
     });
   } catch (const std::bad_alloc&) {
     status_ = Status::ResourceExhausted(

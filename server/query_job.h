@@ -1,7 +1,7 @@
 // QueryJob: the compute side of one Query — seeds, engine, encoding — on its own thread, feeding a bounded queue.
 // Contract:
 //   * start() launches a dedicated compute thread (never a gRPC thread) that enters the server's shared TBB
-//     arena, builds the seeds and runs computeDistanceField with threads = 0 (the arena's workers help).
+//     arena, builds the seeds and runs computeBandField with threads = 0 (the arena's workers help).
 //   * The engine hands finished bricks over in chunks of at most kQueryChunkBricks; each chunk is encoded into
 //     BrickBatch messages (<= batch_bytes each) pushed into a byte-bounded queue, and a segment's last chunk is
 //     followed by its SegmentDone. When the writer (the gRPC handler) falls behind, push blocks and the engine
@@ -21,7 +21,7 @@
 
 #include <tbb/task_arena.h>
 
-#include "core/engine.h"
+#include "core/band/band_engine.h"
 #include "core/interrupter.h"
 #include "core/status.h"
 #include "distband/v1/distband.pb.h"
@@ -50,7 +50,7 @@ class QueryJob final : public QueryStream {
   Clock::time_point stopped() const override { return engine_stopped_; }
   void summarize(v1::QuerySummary* summary) const override;
   std::string logStats() const override;
-  const EngineResult& result() const { return result_; }
+  const FieldRunResult& result() const { return result_; }
   Clock::time_point started() const { return started_; }
 
  private:
@@ -64,7 +64,7 @@ class QueryJob final : public QueryStream {
   std::thread thread_;
 
   Status status_;
-  EngineResult result_;
+  FieldRunResult result_;
   double seed_seconds_ = 0;
   Clock::time_point started_{}, engine_stopped_{}, segment_started_{};
   double segment_compute_seconds_ = 0;

@@ -5,7 +5,7 @@
 
 #include <fmt/format.h>
 
-#include "core/band_extent.h"
+#include "core/field/band_extent.h"
 #include "core/mesh/mesh_grid.h"
 #include "server/asset_parsing.h"
 
@@ -109,7 +109,7 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, con
       h = 1;
     }
     *grid = Grid(g.has_origin() ? toVec(g.origin()) : Vec3d{}, h, dims);
-    return grid->validate().empty() ? Status::Ok() : invalid("grid: " + grid->validate());
+    return grid->validate().withPrefix("grid");
   }
 
   if (g.has_origin()) return invalid("grid.origin is only used with grid.dims (the box or the seeds give it)");
@@ -136,8 +136,7 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, con
       point_bounds.vertices = q.points;
     }
   }
-  if (std::string e = gridForMesh(*bounds, mo, grid, padding); !e.empty()) return invalid("grid: " + e);
-  return Status::Ok();
+  return gridForMesh(*bounds, mo, grid, padding).withPrefix("grid");
 }
 
 Status resolveBox(const v1::VoxelBox& b, const Grid& grid, const char* field, VoxelBox* out) {
@@ -214,35 +213,22 @@ void estimateMemory(ResolvedQuery* q) {
   const Grid grid = q->engineGrid();
   const double limit_voxels = q->plan.limitVoxels(grid);
   BandExtent extent(grid, limit_voxels);
-  FieldMemoryInput in;
-  in.mode = q->plan.mode;
-  in.grid_voxels = uint64_t(grid.voxelCount());
-  in.chunk_bricks = kQueryChunkBricks;
-  in.closest_features = q->plan.closest_features;
-  in.separable = q->plan.algorithm == FieldAlgorithm::kSeparable;
-  in.limited = std::isfinite(limit_voxels);
+  SeedCounts counts;
   switch (q->seed_kind) {
     case SeedKind::kPoints:
-      in.seed_kind = FieldMemoryInput::SeedKind::kPoints;
-      in.points = q->points.size();
-      if (in.separable && q->plan.point_layout)
-        in.separable_plane_voxels = uint64_t(q->plan.point_layout->planes) * grid.dims().x * grid.dims().y;
+      counts.points = q->points.size();
       for (const Vec3d& p : q->points) extent.addPoint(grid.indexOf(p));
       break;
     case SeedKind::kVolume:
-      in.seed_kind = FieldMemoryInput::SeedKind::kVolume;
-      in.signed_volume = q->plan.inside_negative;
-      in.volume_seed_voxels = q->asset->footprint->seed_voxels;
-      in.volume_boundary_voxels = q->asset->footprint->boundary_voxels;
-      addVolume(*q->asset->footprint, in.signed_volume, &extent);
+      counts.volume_seed_voxels = q->asset->footprint->seed_voxels;
+      counts.volume_boundary_voxels = q->asset->footprint->boundary_voxels;
+      addVolume(*q->asset->footprint, q->plan.inside_negative, &extent);
       break;
     case SeedKind::kMesh: {
-      in.seed_kind = FieldMemoryInput::SeedKind::kMesh;
       const TriangleMesh& mesh = *q->asset->mesh;
-      in.mesh_vertices = mesh.vertices.size();
-      in.mesh_triangles = mesh.triangles.size();
-      in.mesh_area_voxels = meshAreaVoxels(mesh, grid.voxelSize());
-      in.mesh_sign = q->plan.mesh_sign;
+      counts.mesh_vertices = mesh.vertices.size();
+      counts.mesh_triangles = mesh.triangles.size();
+      counts.mesh_area_voxels = meshAreaVoxels(mesh, grid.voxelSize());
       if (!extent.wholeGrid())
         for (const auto& t : mesh.triangles) {
           const Vec3d a = grid.indexOf(mesh.vertices[t[0]]), b = grid.indexOf(mesh.vertices[t[1]]),
@@ -254,7 +240,6 @@ void estimateMemory(ResolvedQuery* q) {
     }
   }
   q->touched_voxels_bound = extent.voxelBound();
-  in.touched_voxels = q->touched_voxels_bound;
   // What the query will likely deliver, for the client's progress: the band's volume (a shell around a mesh or a
   // volume's boundary, balls around points), at most the touched bound. Not an admission figure.
   double expected = double(q->touched_voxels_bound);
@@ -263,13 +248,14 @@ void estimateMemory(ResolvedQuery* q) {
     switch (q->seed_kind) {
       case SeedKind::kPoints: expected = double(q->points.size()) * 4.18879 * l * l * l; break;
       case SeedKind::kVolume:
-        expected = double(in.volume_seed_voxels) + double(in.volume_boundary_voxels) * l * (in.signed_volume ? 2 : 1);
+        expected = double(counts.volume_seed_voxels) +
+                   double(counts.volume_boundary_voxels) * l * (q->plan.inside_negative ? 2 : 1);
         break;
-      case SeedKind::kMesh: expected = in.mesh_area_voxels * 2 * l; break;
+      case SeedKind::kMesh: expected = counts.mesh_area_voxels * 2 * l; break;
     }
   }
   q->expected_voxels = uint64_t(std::min(expected, double(q->touched_voxels_bound)));
-  q->memory = estimateFieldMemory(in);
+  q->memory = estimateFieldMemory(q->plan, grid, counts, q->touched_voxels_bound, kQueryChunkBricks);
 }
 
 }  // namespace
@@ -354,9 +340,9 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
   if (q.seed_kind == SeedKind::kPoints) fr.point_layout = pointLayout(q.points);  // the planner's cost model
   if (!r.has_grid()) return invalid("grid must be set (voxel_size or resolution, or dims)");
   if (Status s = resolveGrid(r.grid(), q, r.has_tile(), fr, &q.grid, &q.padding); !s.ok()) return s;
-  if (std::string e = planField(fr, q.grid, q.seed_kind == SeedKind::kMesh ? &q.asset->mesh_report : nullptr, &q.plan);
-      !e.empty())
-    return invalid(e);
+  if (Status s = planField(fr, q.grid, q.seed_kind == SeedKind::kMesh ? &q.asset->mesh_report : nullptr, &q.plan);
+      !s.ok())
+    return s;
   if (q.seed_kind == SeedKind::kVolume && q.plan.inside_negative &&
       q.asset->footprint->seed_voxels == uint64_t(q.asset->dims.x) * q.asset->dims.y * q.asset->dims.z)
     return invalid("sign: SIGN_MODE_MASK_INSIDE needs a zero voxel in the mask (every voxel is inside, so the "
@@ -371,7 +357,7 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
         fmt::format("{}: {}x{}x{} = {} voxels exceeds the server's voxel budget of {} per query",
                     q.tile ? "tile.window" : "grid", computed.dims().x, computed.dims().y, computed.dims().z, voxels,
                     options.max_voxels_per_query));
-  if (std::string e = validateOptions(q.engineGrid(), q.plan.engineOptions()); !e.empty()) return invalid(e);
+  if (Status s = validateRunOptions(q.engineGrid(), q.plan.runOptions()); !s.ok()) return s;
   // Without a limit the engine's own segment-count rule does not apply: bound it by the grid's diagonal, the
   // largest distance a voxel can have, so a tiny segment length cannot request millions of empty segments.
   if (q.plan.segment_length_world > 0) {

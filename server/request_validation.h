@@ -4,7 +4,8 @@
 // budget, engine site limit), with a message that names the field and the rule, e.g. "grid.resolution must be in
 // [2, 16384] (got 1)". It is cheap: O(seeds + grid/512) for the touched-voxel bound, no allocation of the field.
 // On OK, `out` holds the grid, the engine options (without an interrupter), the seeds' source and the memory
-// estimate the query is admitted with; building the Seeds is compute work done later (server/seed_builder.h).
+// estimate the query is admitted with; building the algorithm's inputs is compute work done later, by the query job
+// (buildFieldInputs, core/field/compute_field.h).
 // Thread-safe (the cache is).
 #pragma once
 
@@ -13,13 +14,13 @@
 #include <string>
 #include <vector>
 
-#include "core/engine.h"
-#include "core/field_plan.h"
-#include "core/field_memory.h"
+#include "core/band/band_engine.h"
+#include "core/field/field_plan.h"
+#include "core/field/field_memory.h"
 #include "core/status.h"
 #include "core/grid.h"
 #include "core/mesh/mesh_grid.h"
-#include "core/tiling.h"
+#include "core/field/tiling.h"
 #include "distband/v1/distband.pb.h"
 #include "server/asset_cache.h"
 #include "server/server_options.h"
@@ -57,7 +58,7 @@ Status resolveQuery(const v1::QueryRequest& request, const ServerOptions& option
 /// The cheap checks of QueryRequest.mesh (format, size) before it is parsed; OK for requests without one.
 Status checkInlineMesh(const v1::QueryRequest& request, const ServerOptions& options);
 
-/// Output bricks the engine hands to a query's encoder at once (EngineOptions::max_chunk_bricks).
+/// Output bricks the engine hands to a query's encoder at once (BandOptions::max_chunk_bricks).
 inline constexpr size_t kQueryChunkBricks = 1024;
 
 /// A plan's choices as the protocol names them (the header, and a coordinator's requests to its replicas).

@@ -82,7 +82,7 @@ struct QueryRecord {
   bool interrupted = false;       ///< the engine stopped early (cancel, disconnect, deadline, shutdown)
   Clock::time_point received{};   ///< handler entered
   Clock::time_point cancel_seen{};     ///< when the server noticed the cancel/disconnect (if it did)
-  Clock::time_point engine_stopped{};  ///< computeDistanceField returned
+  Clock::time_point engine_stopped{};  ///< computeBandField returned
   Clock::time_point finished{};        ///< handler about to return
   uint64_t voxels = 0, bricks = 0, messages = 0, bytes = 0;
   uint64_t reserved_bytes = 0;         ///< the memory-budget reservation it was admitted with

@@ -1,6 +1,6 @@
 // TiledQuery: a Query spread over replicas by a coordinator (distband-server --peers).
 // Contract (QueryStream, server/query_stream.h):
-//   * The grid is cut into tiles of whole bricks (core/tiling.h, at most --tile-voxels each). Each tile is one Query
+//   * The grid is cut into tiles of whole bricks (core/field/tiling.h, at most --tile-voxels each). Each tile is one Query
 //     call (QueryRequest.tile) on the round_robin channel of the ReplicaPool, so balancing is per tile; at most
 //     --tiles-in-flight calls per replica run at once (and at most 128 per query: one thread each). The tile's window is the tile grown by the limit plus two
 //     bricks; without a limit, point seeds still use that margin (the engine is exact for sites outside its grid),
@@ -37,7 +37,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "core/interrupter.h"
-#include "core/tiling.h"
+#include "core/field/tiling.h"
 #include "server/query_stream.h"
 #include "server/replica_pool.h"
 #include "server/request_validation.h"

@@ -46,14 +46,14 @@ std::string fieldMetadataJson(const FieldMetadata& m) {
   return j.dump(2) + "\n";
 }
 
-std::string writeFieldMetadata(const std::string& path, const FieldMetadata& meta) {
+Status writeFieldMetadata(const std::string& path, const FieldMetadata& meta) {
   const std::string text = fieldMetadataJson(meta);
   std::string tmp;  // atomic, like every output writer: a temporary beside the target, renamed over it
   std::FILE* f = nullptr;
-  if (std::string e = openTempBeside(path, "w", &tmp, &f); !e.empty()) return e;
-  std::string err;
+  if (Status s = openTempBeside(path, "w", &tmp, &f); !s.ok()) return s;
+  Status err;
   if (std::fwrite(text.data(), 1, text.size(), f) != text.size())
-    err = fmt::format("{}: write failed: {}", path, std::strerror(errno));
+    err = Status::IoError(fmt::format("{}: write failed: {}", path, std::strerror(errno)));
   return commitTemp(f, tmp, path, err);
 }
 

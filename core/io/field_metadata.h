@@ -1,13 +1,15 @@
 // Field metadata: the JSON sidecar that tells a reader of a dense field file how to interpret it.
 // Contract: describes one computed field — grid (dims, origin, voxel size), the array layout, units and sign
 // convention, the distance limit and the background value stored beyond it, and how it was computed. Pure
-// formatting; writeFieldMetadata() returns "" on success or a message naming the path. Thread-safe.
+// formatting; writeFieldMetadata() writes atomically (a temporary beside the target, renamed over it) and returns
+// OK, or kIoError with a message naming the file when the OS cannot create, write or rename it. Thread-safe.
 #pragma once
 
 #include <cstdint>
 #include <string>
 
 #include "core/grid.h"
+#include "core/status.h"
 
 namespace distband {
 
@@ -38,6 +40,6 @@ struct FieldMetadata {
 /// The metadata as pretty-printed JSON text.
 std::string fieldMetadataJson(const FieldMetadata& meta);
 
-std::string writeFieldMetadata(const std::string& path, const FieldMetadata& meta);
+Status writeFieldMetadata(const std::string& path, const FieldMetadata& meta);
 
 }  // namespace distband

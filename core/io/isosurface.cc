@@ -57,19 +57,19 @@ struct Neighbourhood {
 
 }  // namespace
 
-std::string extractIsosurface(const VdbTree<float>& field, const Grid& grid, const IsosurfaceOptions& options,
-                              TriangleMeshF* mesh) {
+Status extractIsosurface(const VdbTree<float>& field, const Grid& grid, const IsosurfaceOptions& options,
+                         TriangleMeshF* mesh) {
   mesh->vertices.clear();
   mesh->triangles.clear();
   const double d = options.distance_world;
-  if (!std::isfinite(d)) return fmt::format("isosurface distance must be finite (got {})", d);
-  if (!field.sealed()) return "isosurface: the field is not finished (sealed)";
+  if (!std::isfinite(d)) return Status::InvalidArgument(fmt::format("isosurface distance must be finite (got {})", d));
+  if (!field.sealed()) return Status::InvalidArgument("isosurface: the field is not finished (sealed)");
   const double background = std::abs(double(field.background()));
   if (!(std::abs(d) < background))
-    return fmt::format(
+    return Status::InvalidArgument(fmt::format(
         "isosurface distance {} is not inside the field's limit (|D| must be < the grid background {}); "
         "query with a larger limit",
-        d, background);
+        d, background));
   const float iso = float(d);
   const auto& leaves = field.leaves();
   const size_t n = leaves.size();
@@ -170,18 +170,18 @@ std::string extractIsosurface(const VdbTree<float>& field, const Grid& grid, con
   for (const auto& f : faces) total += f.size();
   mesh->triangles.reserve(total);
   for (const auto& f : faces) mesh->triangles.insert(mesh->triangles.end(), f.begin(), f.end());
-  return {};
+  return Status::Ok();
 }
 
-std::string writeObj(const std::string& path, const TriangleMeshF& mesh, const std::string& comment) {
+Status writeObj(const std::string& path, const TriangleMeshF& mesh, const std::string& comment) {
   for (const auto& t : mesh.triangles)
     for (uint32_t v : t)
       if (v >= mesh.vertices.size())
-        return fmt::format("OBJ: triangle refers to vertex {} of {}", v, mesh.vertices.size());
+        return Status::InvalidArgument(fmt::format("OBJ: triangle refers to vertex {} of {}", v, mesh.vertices.size()));
 
   std::string tmp;
   std::FILE* file = nullptr;
-  if (std::string err = openTempBeside(path, "w", &tmp, &file); !err.empty()) return err;
+  if (Status s = openTempBeside(path, "w", &tmp, &file); !s.ok()) return s;
   // Format in chunks: far faster than one stdio call per number for million-triangle meshes.
   fmt::memory_buffer buf;
   bool ok = true;
@@ -212,14 +212,16 @@ std::string writeObj(const std::string& path, const TriangleMeshF& mesh, const s
     flush(false);
   }
   flush(true);
-  return commitTemp(file, tmp, path, ok ? "" : fmt::format("cannot write '{}': {}", tmp, std::strerror(errno)));
+  return commitTemp(file, tmp, path,
+                    ok ? Status::Ok()
+                       : Status::IoError(fmt::format("cannot write '{}': {}", tmp, std::strerror(errno))));
 }
 
-std::string writeIsosurfaceObj(const std::string& path, const VdbTree<float>& field, const Grid& grid,
-                               const IsosurfaceOptions& options, TriangleMeshF* mesh_out) {
+Status writeIsosurfaceObj(const std::string& path, const VdbTree<float>& field, const Grid& grid,
+                          const IsosurfaceOptions& options, TriangleMeshF* mesh_out) {
   TriangleMeshF local;
   TriangleMeshF* mesh = mesh_out ? mesh_out : &local;
-  if (std::string err = extractIsosurface(field, grid, options, mesh); !err.empty()) return err;
+  if (Status s = extractIsosurface(field, grid, options, mesh); !s.ok()) return s;
   const std::string name = options.field_name.empty() ? std::string("distance field") : options.field_name;
   return writeObj(path, *mesh,
                   fmt::format("distband isosurface of '{}' at distance {} (world units, negative inside)", name,

@@ -17,7 +17,9 @@
 //     voxels gives an empty mesh (and an OBJ with no faces). The tree must be sealed (and flood-filled).
 //   * writeIsosurfaceObj() writes "v x y z" lines then 1-based "f a b c" lines, through a temporary file in
 //     the target's directory renamed over `path`, so an interrupted run never leaves a partial OBJ.
-//   * Errors come back as a non-empty message; nothing is thrown for bad input or I/O.
+//   * Errors come back as a Status; nothing is thrown for bad input or I/O. kInvalidArgument for a D that is not
+//     finite or not inside the limit, an unsealed tree, or a triangle that refers to a missing vertex; kIoError when
+//     the OS cannot create, write or rename the OBJ file (the message names the file and the OS's reason).
 // Thread-safety: re-entrant; the tree is only read (cells are meshed in parallel on the caller's TBB arena).
 #pragma once
 
@@ -28,6 +30,7 @@
 
 #include "core/grid.h"
 #include "core/io/vdb_tree.h"
+#include "core/status.h"
 
 namespace distband {
 
@@ -41,16 +44,16 @@ struct IsosurfaceOptions {
   std::string field_name = "distance";  ///< named in the OBJ's header
 };
 
-/// Extracts the isosurface of `field`, whose index space is `grid`'s. Returns "" on success (mesh filled),
-/// otherwise why not (mesh cleared).
-std::string extractIsosurface(const VdbTree<float>& field, const Grid& grid, const IsosurfaceOptions& options,
-                              TriangleMeshF* mesh);
+/// Extracts the isosurface of `field`, whose index space is `grid`'s. Returns OK (mesh filled), otherwise
+/// kInvalidArgument saying why not (mesh cleared).
+Status extractIsosurface(const VdbTree<float>& field, const Grid& grid, const IsosurfaceOptions& options,
+                         TriangleMeshF* mesh);
 
 /// Writes `mesh` as OBJ to `path` (temp file + rename). `comment` (optional) becomes "# ..." header lines.
-std::string writeObj(const std::string& path, const TriangleMeshF& mesh, const std::string& comment = {});
+Status writeObj(const std::string& path, const TriangleMeshF& mesh, const std::string& comment = {});
 
 /// extractIsosurface + writeObj. On success `mesh_out` (optional) receives the mesh written.
-std::string writeIsosurfaceObj(const std::string& path, const VdbTree<float>& field, const Grid& grid,
-                               const IsosurfaceOptions& options, TriangleMeshF* mesh_out = nullptr);
+Status writeIsosurfaceObj(const std::string& path, const VdbTree<float>& field, const Grid& grid,
+                          const IsosurfaceOptions& options, TriangleMeshF* mesh_out = nullptr);
 
 }  // namespace distband

@@ -27,21 +27,22 @@ class HeaderParser {
  public:
   explicit HeaderParser(std::string_view text) : s_(text) {}
 
-  std::string parse(NpyArray* out) {
+  Status parse(NpyArray* out) {
+    auto invalid = [](std::string m) { return Status::InvalidArgument(std::move(m)); };
     bool have_descr = false, have_order = false, have_shape = false;
     skipSpace();
-    if (!eat('{')) return "header is not a Python dict (expected '{')";
+    if (!eat('{')) return invalid("header is not a Python dict (expected '{')");
     for (;;) {
       skipSpace();
       if (eat('}')) break;
       std::string key;
-      if (!parseString(&key)) return fmt::format("header: expected a quoted key at offset {}", pos_);
+      if (!parseString(&key)) return invalid(fmt::format("header: expected a quoted key at offset {}", pos_));
       skipSpace();
-      if (!eat(':')) return fmt::format("header: expected ':' after key '{}'", key);
+      if (!eat(':')) return invalid(fmt::format("header: expected ':' after key '{}'", key));
       skipSpace();
       if (key == "descr") {
-        if (peek() == '[') return "unsupported dtype: structured arrays are not accepted";
-        if (!parseString(&out->descr)) return "header: 'descr' must be a quoted dtype string";
+        if (peek() == '[') return invalid("unsupported dtype: structured arrays are not accepted");
+        if (!parseString(&out->descr)) return invalid("header: 'descr' must be a quoted dtype string");
         have_descr = true;
       } else if (key == "fortran_order") {
         if (matchWord("True")) {
@@ -49,28 +50,27 @@ class HeaderParser {
         } else if (matchWord("False")) {
           out->fortran_order = false;
         } else {
-          return "header: 'fortran_order' must be True or False";
+          return invalid("header: 'fortran_order' must be True or False");
         }
         have_order = true;
       } else if (key == "shape") {
-        std::string err = parseShape(&out->shape);
-        if (!err.empty()) return err;
+        if (Status s = parseShape(&out->shape); !s.ok()) return s;
         have_shape = true;
       } else {
-        return fmt::format("header: unexpected key '{}'", key);
+        return invalid(fmt::format("header: unexpected key '{}'", key));
       }
       skipSpace();
       if (eat(',')) continue;
       skipSpace();
       if (eat('}')) break;
-      return fmt::format("header: expected ',' or '}}' at offset {}", pos_);
+      return invalid(fmt::format("header: expected ',' or '}}' at offset {}", pos_));
     }
     skipSpace();
-    if (pos_ != s_.size()) return "header: unexpected text after the dict";
-    if (!have_descr) return "header: missing 'descr'";
-    if (!have_order) return "header: missing 'fortran_order'";
-    if (!have_shape) return "header: missing 'shape'";
-    return {};
+    if (pos_ != s_.size()) return invalid("header: unexpected text after the dict");
+    if (!have_descr) return invalid("header: missing 'descr'");
+    if (!have_order) return invalid("header: missing 'fortran_order'");
+    if (!have_shape) return invalid("header: missing 'shape'");
+    return Status::Ok();
   }
 
  private:
@@ -97,18 +97,20 @@ class HeaderParser {
     pos_ = end + 1;
     return true;
   }
-  std::string parseShape(std::vector<int64_t>* shape) {
+  /// kInvalidArgument for a malformed tuple; kResourceExhausted for an extent above kMaxExtent (a hard limit).
+  Status parseShape(std::vector<int64_t>* shape) {
     shape->clear();
-    if (!eat('(')) return "header: 'shape' must be a tuple";
+    if (!eat('(')) return Status::InvalidArgument("header: 'shape' must be a tuple");
     for (;;) {
       skipSpace();
-      if (eat(')')) return {};
+      if (eat(')')) return Status::Ok();
       if (!std::isdigit(static_cast<unsigned char>(peek())))
-        return fmt::format("header: 'shape' holds a non-integer or negative extent at offset {}", pos_);
+        return Status::InvalidArgument(
+            fmt::format("header: 'shape' holds a non-integer or negative extent at offset {}", pos_));
       int64_t v = 0;
       while (std::isdigit(static_cast<unsigned char>(peek()))) {
         v = v * 10 + (s_[pos_++] - '0');
-        if (v > kMaxExtent) return "header: a shape extent is absurdly large";
+        if (v > kMaxExtent) return Status::ResourceExhausted("header: a shape extent is absurdly large");
       }
       if (eat('L')) {
       }  // Python 2 long suffix, as old numpy wrote it
@@ -116,8 +118,8 @@ class HeaderParser {
       skipSpace();
       if (eat(',')) continue;
       skipSpace();
-      if (eat(')')) return {};
-      return fmt::format("header: malformed 'shape' tuple at offset {}", pos_);
+      if (eat(')')) return Status::Ok();
+      return Status::InvalidArgument(fmt::format("header: malformed 'shape' tuple at offset {}", pos_));
     }
   }
 
@@ -139,42 +141,45 @@ size_t itemSize(std::string_view descr) {
 }
 
 /// Reads the fixed preamble (magic, version, header length). `prefix` must hold at least 12 bytes or the
-/// whole file. Sets the header text offset/length.
-std::string parsePreamble(std::string_view prefix, std::string_view name, size_t* header_start, size_t* header_len) {
+/// whole file. Sets the header text offset/length. Every failure is kInvalidArgument (malformed bytes).
+Status parsePreamble(std::string_view prefix, std::string_view name, size_t* header_start, size_t* header_len) {
+  auto invalid = [&](std::string_view problem) {
+    return Status::InvalidArgument(fmt::format("{}: {}", name, problem));
+  };
   if (prefix.size() < kMagicLen || std::memcmp(prefix.data(), kMagic, kMagicLen) != 0)
-    return fmt::format("{}: not a .npy file (missing the \\x93NUMPY magic)", name);
-  if (prefix.size() < 10) return fmt::format("{}: truncated .npy preamble", name);
+    return invalid("not a .npy file (missing the \\x93NUMPY magic)");
+  if (prefix.size() < 10) return invalid("truncated .npy preamble");
   const int major = static_cast<uint8_t>(prefix[6]);
   const int minor = static_cast<uint8_t>(prefix[7]);
   if ((major != 1 && major != 2 && major != 3) || minor != 0)
-    return fmt::format("{}: unsupported .npy format version {}.{} (expected 1.0, 2.0 or 3.0)", name, major, minor);
+    return invalid(fmt::format("unsupported .npy format version {}.{} (expected 1.0, 2.0 or 3.0)", major, minor));
   auto byte = [&](size_t i) { return size_t(static_cast<uint8_t>(prefix[i])); };
   if (major == 1) {
     *header_start = 10;
     *header_len = byte(8) | (byte(9) << 8);
   } else {
-    if (prefix.size() < 12) return fmt::format("{}: truncated .npy preamble", name);
+    if (prefix.size() < 12) return invalid("truncated .npy preamble");
     *header_start = 12;
     *header_len = byte(8) | (byte(9) << 8) | (byte(10) << 16) | (byte(11) << 24);
   }
-  if (*header_len == 0) return fmt::format("{}: empty .npy header", name);
-  return {};
+  if (*header_len == 0) return invalid("empty .npy header");
+  return Status::Ok();
 }
 
-/// Parses the header dict and computes the payload size.
-std::string parseHeader(std::string_view header, std::string_view name, NpyArray* out, uint64_t* payload_bytes) {
+/// Parses the header dict and computes the payload size. kInvalidArgument for a malformed header or an unsupported
+/// dtype; kResourceExhausted when the shape exceeds a hard limit (an extent above kMaxExtent, over 2^46 bytes).
+Status parseHeader(std::string_view header, std::string_view name, NpyArray* out, uint64_t* payload_bytes) {
   for (char c : header)
-    if (c == '\0') return fmt::format("{}: .npy header contains a NUL byte", name);
-  std::string err = HeaderParser(header).parse(out);
-  if (!err.empty()) return fmt::format("{}: {}", name, err);
+    if (c == '\0') return Status::InvalidArgument(fmt::format("{}: .npy header contains a NUL byte", name));
+  if (Status s = HeaderParser(header).parse(out); !s.ok()) return s.withPrefix(name);
   const size_t item = itemSize(out->descr);
-  if (item == 0) return fmt::format("{}: unsupported dtype '{}'", name, out->descr);
+  if (item == 0) return Status::InvalidArgument(fmt::format("{}: unsupported dtype '{}'", name, out->descr));
   uint64_t n = item;
   for (int64_t e : out->shape)
     if (__builtin_mul_overflow(n, uint64_t(e), &n) || n > (uint64_t(1) << 46))
-      return fmt::format("{}: the array is too large", name);
+      return Status::ResourceExhausted(fmt::format("{}: the array is too large", name));
   *payload_bytes = n;
-  return {};
+  return Status::Ok();
 }
 
 std::string shapeText(const std::vector<int64_t>& shape) {
@@ -184,128 +189,136 @@ std::string shapeText(const std::vector<int64_t>& shape) {
   return s + ")";
 }
 
-/// Checks a parsed array is a C-order (Z, Y, X) volume and returns dims {X, Y, Z}.
-std::string volumeDims(const NpyArray& a, std::string_view name, Coord* dims) {
-  if (a.fortran_order) return fmt::format("{}: fortran_order arrays are not accepted (save a C-order array)", name);
+/// Checks a parsed array is a C-order (Z, Y, X) volume and returns dims {X, Y, Z}; kInvalidArgument otherwise (an
+/// extent outside [1, kMaxGridDim] is a shape no grid can have).
+Status volumeDims(const NpyArray& a, std::string_view name, Coord* dims) {
+  if (a.fortran_order)
+    return Status::InvalidArgument(
+        fmt::format("{}: fortran_order arrays are not accepted (save a C-order array)", name));
   if (a.shape.size() != 3)
-    return fmt::format("{}: expected a 3-D array of shape (Z, Y, X), got shape {}", name, shapeText(a.shape));
+    return Status::InvalidArgument(
+        fmt::format("{}: expected a 3-D array of shape (Z, Y, X), got shape {}", name, shapeText(a.shape)));
   for (int64_t e : a.shape)
     if (e < 1 || e > kMaxGridDim)
-      return fmt::format("{}: every extent must be in [1, {}], got shape {}", name, kMaxGridDim, shapeText(a.shape));
+      return Status::InvalidArgument(
+          fmt::format("{}: every extent must be in [1, {}], got shape {}", name, kMaxGridDim, shapeText(a.shape)));
   *dims = {int32_t(a.shape[2]), int32_t(a.shape[1]), int32_t(a.shape[0])};
-  return {};
+  return Status::Ok();
 }
 
-std::string writeNpyFile(const std::string& path, std::string_view descr, const Coord& dims, const void* data,
-                         size_t bytes) {
+/// kIoError when the OS cannot create, write or rename the file.
+Status writeNpyFile(const std::string& path, std::string_view descr, const Coord& dims, const void* data,
+                    size_t bytes) {
   const std::vector<int64_t> shape{dims.z, dims.y, dims.x};
   std::string header = encodeNpy(descr, shape, nullptr, 0);
   // Atomic: a temporary beside the target renamed over it, so an interrupted write never leaves a truncated array.
   std::string tmp;
   std::FILE* f = nullptr;
-  if (std::string e = openTempBeside(path, "wb", &tmp, &f); !e.empty()) return e;
-  std::string err;
+  if (Status s = openTempBeside(path, "wb", &tmp, &f); !s.ok()) return s;
+  Status err;
   if (std::fwrite(header.data(), 1, header.size(), f) != header.size() ||
       std::fwrite(data, 1, bytes, f) != bytes)
-    err = fmt::format("{}: write failed: {}", path, std::strerror(errno));
+    err = Status::IoError(fmt::format("{}: write failed: {}", path, std::strerror(errno)));
   return commitTemp(f, tmp, path, err);
 }
 
-/// "" when the data after the header is exactly what the shape and dtype need, otherwise what is wrong.
-std::string checkPayloadSize(std::string_view name, const NpyArray& a, uint64_t payload, uint64_t have) {
+/// OK when the data after the header is exactly what the shape and dtype need, otherwise kInvalidArgument saying what
+/// is wrong (truncated data or trailing bytes).
+Status checkPayloadSize(std::string_view name, const NpyArray& a, uint64_t payload, uint64_t have) {
   if (have < payload)
-    return fmt::format("{}: truncated: shape {} of '{}' needs {} data bytes, the file holds {}", name,
-                       shapeText(a.shape), a.descr, payload, have);
+    return Status::InvalidArgument(fmt::format("{}: truncated: shape {} of '{}' needs {} data bytes, the file holds {}",
+                                               name, shapeText(a.shape), a.descr, payload, have));
   if (have > payload)
-    return fmt::format("{}: {} unexpected bytes after the {} data bytes of shape {}", name, have - payload, payload,
-                       shapeText(a.shape));
-  return {};
+    return Status::InvalidArgument(fmt::format("{}: {} unexpected bytes after the {} data bytes of shape {}", name,
+                                               have - payload, payload, shapeText(a.shape)));
+  return Status::Ok();
 }
 
 }  // namespace
 
-std::string parseNpy(std::string_view bytes, std::string_view name, NpyArray* out) {
+Status parseNpy(std::string_view bytes, std::string_view name, NpyArray* out) {
   size_t start = 0, len = 0;
-  std::string err = parsePreamble(bytes, name, &start, &len);
-  if (!err.empty()) return err;
+  if (Status s = parsePreamble(bytes, name, &start, &len); !s.ok()) return s;
   if (bytes.size() < start + len)
-    return fmt::format("{}: truncated .npy header ({} bytes declared, {} present)", name, len, bytes.size() - start);
+    return Status::InvalidArgument(fmt::format("{}: truncated .npy header ({} bytes declared, {} present)", name, len,
+                                               bytes.size() - start));
   NpyArray a;
   uint64_t payload = 0;
-  err = parseHeader(bytes.substr(start, len), name, &a, &payload);
-  if (!err.empty()) return err;
+  if (Status s = parseHeader(bytes.substr(start, len), name, &a, &payload); !s.ok()) return s;
   const uint64_t have = bytes.size() - start - len;
-  if (std::string e = checkPayloadSize(name, a, payload, have); !e.empty()) return e;
+  if (Status s = checkPayloadSize(name, a, payload, have); !s.ok()) return s;
   const auto* p = reinterpret_cast<const uint8_t*>(bytes.data()) + start + len;
   a.data.assign(p, p + payload);
   *out = std::move(a);
-  return {};
+  return Status::Ok();
 }
 
-std::string readNpy(const std::string& path, NpyArray* out) {
+Status readNpy(const std::string& path, NpyArray* out) {
+  errno = 0;
   std::ifstream f(path, std::ios::binary);
-  if (!f) return fmt::format("{}: cannot open: {}", path, std::strerror(errno));
+  if (!f) {
+    const int error = errno;
+    std::string message = fmt::format("{}: cannot open: {}", path, std::strerror(error));
+    if (error == ENOENT || error == ENOTDIR) return Status::NotFound(std::move(message));
+    return Status::IoError(std::move(message));
+  }
   f.seekg(0, std::ios::end);
   const std::streamoff file_size = f.tellg();
   f.seekg(0, std::ios::beg);
-  if (file_size < 0) return fmt::format("{}: cannot determine the file size", path);
+  if (file_size < 0) return Status::IoError(fmt::format("{}: cannot determine the file size", path));
   // The preamble is 10 (v1) or 12 (v2/3) bytes; read what exists and let parsePreamble judge.
   std::string pre(static_cast<size_t>(std::min<std::streamoff>(file_size, 12)), '\0');
   f.read(pre.data(), static_cast<std::streamsize>(pre.size()));
-  if (!f) return fmt::format("{}: read failed", path);
+  if (!f) return Status::IoError(fmt::format("{}: read failed", path));
   size_t start = 0, len = 0;
-  std::string err = parsePreamble(pre, path, &start, &len);
-  if (!err.empty()) return err;
+  if (Status s = parsePreamble(pre, path, &start, &len); !s.ok()) return s;
   if (uint64_t(file_size) < start + len)
-    return fmt::format("{}: truncated .npy header ({} bytes declared, {} present)", path, len,
-                       uint64_t(file_size) - std::min<uint64_t>(start, uint64_t(file_size)));
+    return Status::InvalidArgument(fmt::format("{}: truncated .npy header ({} bytes declared, {} present)", path, len,
+                                               uint64_t(file_size) - std::min<uint64_t>(start, uint64_t(file_size))));
   std::string header(len, '\0');
   f.seekg(static_cast<std::streamoff>(start), std::ios::beg);
   f.read(header.data(), static_cast<std::streamsize>(len));
-  if (!f) return fmt::format("{}: read failed", path);
+  if (!f) return Status::IoError(fmt::format("{}: read failed", path));
   NpyArray a;
   uint64_t payload = 0;
-  err = parseHeader(header, path, &a, &payload);
-  if (!err.empty()) return err;
+  if (Status s = parseHeader(header, path, &a, &payload); !s.ok()) return s;
   const uint64_t have = uint64_t(file_size) - start - len;
-  if (std::string e = checkPayloadSize(path, a, payload, have); !e.empty()) return e;
+  if (Status s = checkPayloadSize(path, a, payload, have); !s.ok()) return s;
   a.data.resize(payload);
   f.read(reinterpret_cast<char*>(a.data.data()), static_cast<std::streamsize>(payload));
-  if (!f) return fmt::format("{}: read failed while loading {} data bytes", path, payload);
+  if (!f) return Status::IoError(fmt::format("{}: read failed while loading {} data bytes", path, payload));
   *out = std::move(a);
-  return {};
+  return Status::Ok();
 }
 
-std::string readNpyMask(const std::string& path, std::vector<uint8_t>* mask, Coord* dims) {
+Status readNpyMask(const std::string& path, std::vector<uint8_t>* mask, Coord* dims) {
   NpyArray a;
-  std::string err = readNpy(path, &a);
-  if (!err.empty()) return err;
+  if (Status s = readNpy(path, &a); !s.ok()) return s;
   const std::string_view d = a.descr;
   const bool one_byte = d.size() == 3 && std::strchr("|<>=", d[0]) != nullptr;
   if (!one_byte || (d.substr(1) != "u1" && d.substr(1) != "b1"))
-    return fmt::format("{}: a seed mask must have dtype uint8 or bool, got '{}'", path, a.descr);
+    return Status::InvalidArgument(
+        fmt::format("{}: a seed mask must have dtype uint8 or bool, got '{}'", path, a.descr));
   Coord c;
-  err = volumeDims(a, path, &c);
-  if (!err.empty()) return err;
+  if (Status s = volumeDims(a, path, &c); !s.ok()) return s;
   *mask = std::move(a.data);
   *dims = c;
-  return {};
+  return Status::Ok();
 }
 
-std::string readNpyFloat32(const std::string& path, std::vector<float>* values, Coord* dims) {
+Status readNpyFloat32(const std::string& path, std::vector<float>* values, Coord* dims) {
   NpyArray a;
-  std::string err = readNpy(path, &a);
-  if (!err.empty()) return err;
+  if (Status s = readNpy(path, &a); !s.ok()) return s;
   if (a.descr != "<f4" && a.descr != "=f4")
-    return fmt::format("{}: expected dtype little-endian float32 ('<f4'), got '{}'", path, a.descr);
+    return Status::InvalidArgument(
+        fmt::format("{}: expected dtype little-endian float32 ('<f4'), got '{}'", path, a.descr));
   Coord c;
-  err = volumeDims(a, path, &c);
-  if (!err.empty()) return err;
+  if (Status s = volumeDims(a, path, &c); !s.ok()) return s;
   std::vector<float> v(a.data.size() / sizeof(float));
   std::memcpy(v.data(), a.data.data(), v.size() * sizeof(float));
   *values = std::move(v);
   *dims = c;
-  return {};
+  return Status::Ok();
 }
 
 std::string encodeNpy(std::string_view descr, const std::vector<int64_t>& shape, const void* data, size_t bytes) {
@@ -333,32 +346,35 @@ std::string encodeNpy(std::string_view descr, const std::vector<int64_t>& shape,
   return out;
 }
 
-std::string writeNpyFloat32(const std::string& path, const std::vector<float>& values, const Coord& dims) {
+Status writeNpyFloat32(const std::string& path, const std::vector<float>& values, const Coord& dims) {
   if (int64_t(values.size()) != int64_t(dims.x) * dims.y * dims.z)
-    return fmt::format("{}: {} values do not fill dims {}x{}x{}", path, values.size(), dims.x, dims.y, dims.z);
+    return Status::InvalidArgument(
+        fmt::format("{}: {} values do not fill dims {}x{}x{}", path, values.size(), dims.x, dims.y, dims.z));
   static_assert(std::numeric_limits<float>::is_iec559, "float32 output assumes IEEE-754 floats");
   return writeNpyFile(path, "<f4", dims, values.data(), values.size() * sizeof(float));
 }
 
-std::string writeNpyMask(const std::string& path, const std::vector<uint8_t>& mask, const Coord& dims) {
+Status writeNpyMask(const std::string& path, const std::vector<uint8_t>& mask, const Coord& dims) {
   if (int64_t(mask.size()) != int64_t(dims.x) * dims.y * dims.z)
-    return fmt::format("{}: {} bytes do not fill dims {}x{}x{}", path, mask.size(), dims.x, dims.y, dims.z);
+    return Status::InvalidArgument(
+        fmt::format("{}: {} bytes do not fill dims {}x{}x{}", path, mask.size(), dims.x, dims.y, dims.z));
   return writeNpyFile(path, "|u1", dims, mask.data(), mask.size());
 }
 
 namespace {
 template <typename T>
-std::string writeNpyInts(const std::string& path, const char* descr, const std::vector<T>& values, const Coord& dims) {
+Status writeNpyInts(const std::string& path, const char* descr, const std::vector<T>& values, const Coord& dims) {
   if (int64_t(values.size()) != int64_t(dims.x) * dims.y * dims.z)
-    return fmt::format("{}: {} values do not fill dims {}x{}x{}", path, values.size(), dims.x, dims.y, dims.z);
+    return Status::InvalidArgument(
+        fmt::format("{}: {} values do not fill dims {}x{}x{}", path, values.size(), dims.x, dims.y, dims.z));
   return writeNpyFile(path, descr, dims, values.data(), values.size() * sizeof(T));
 }
 }  // namespace
 
-std::string writeNpyInt32(const std::string& path, const std::vector<int32_t>& values, const Coord& dims) {
+Status writeNpyInt32(const std::string& path, const std::vector<int32_t>& values, const Coord& dims) {
   return writeNpyInts(path, "<i4", values, dims);
 }
-std::string writeNpyInt64(const std::string& path, const std::vector<int64_t>& values, const Coord& dims) {
+Status writeNpyInt64(const std::string& path, const std::vector<int64_t>& values, const Coord& dims) {
   return writeNpyInts(path, "<i8", values, dims);
 }
 

@@ -4,8 +4,13 @@
 //     x-fastest order as Grid::denseIndex. dims are returned and taken as Coord{X, Y, Z}.
 //   * Reading validates everything an untrusted file can get wrong — magic, format version (1.0, 2.0, 3.0),
 //     header syntax, dtype, fortran_order, shape (rank 3, every extent in [1, kMaxGridDim]) and the payload
-//     size (truncated or trailing bytes) — and returns a message naming the file and the problem, never throws
-//     or asserts. Every function returns "" on success; on failure the outputs are left untouched.
+//     size (truncated or trailing bytes) — and returns a Status whose message names the file and the problem; it
+//     never throws or asserts. On failure the outputs are left untouched.
+//   * Codes: kInvalidArgument for malformed bytes or an array of the wrong kind (bad magic, version, header, dtype,
+//     order or rank, an extent outside [1, kMaxGridDim], a payload that does not match the shape) and for values
+//     that do not fill `dims` when writing; kResourceExhausted for a header whose shape exceeds the reader's hard
+//     limits (an extent above 2^40, or more than 2^46 payload bytes); kNotFound when the file to read does not
+//     exist; kIoError when the OS cannot open, read, write or rename a file.
 //   * Accepted element types: masks are uint8 ('|u1') or bool ('|b1'); nonzero means "seed". float32 ('<f4')
 //     can be read for tests and round trips. Writing produces version 1.0 (2.0 for huge headers) files with the
 //     header padded to a multiple of 64 bytes, as numpy.save does.
@@ -17,6 +22,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/status.h"
 #include "core/types.h"
 
 namespace distband {
@@ -30,29 +36,29 @@ struct NpyArray {
 };
 
 /// Parses a whole .npy image held in memory. `name` only labels error messages.
-std::string parseNpy(std::string_view bytes, std::string_view name, NpyArray* out);
+Status parseNpy(std::string_view bytes, std::string_view name, NpyArray* out);
 
 /// Reads and parses a .npy file.
-std::string readNpy(const std::string& path, NpyArray* out);
+Status readNpy(const std::string& path, NpyArray* out);
 
 /// Reads a 3-D uint8 or bool mask of shape (Z, Y, X); dims = {X, Y, Z}; mask bytes are x-fastest.
-std::string readNpyMask(const std::string& path, std::vector<uint8_t>* mask, Coord* dims);
+Status readNpyMask(const std::string& path, std::vector<uint8_t>* mask, Coord* dims);
 
 /// Reads a 3-D little-endian float32 array of shape (Z, Y, X); dims = {X, Y, Z}.
-std::string readNpyFloat32(const std::string& path, std::vector<float>* values, Coord* dims);
+Status readNpyFloat32(const std::string& path, std::vector<float>* values, Coord* dims);
 
 /// Serialises a C-order array to a .npy image. `descr` must be a dtype numpy understands (not checked here);
 /// `data` must hold prod(shape) * itemsize bytes.
 std::string encodeNpy(std::string_view descr, const std::vector<int64_t>& shape, const void* data, size_t bytes);
 
 /// Writes float32 values (x-fastest, dims.x*dims.y*dims.z of them) as a (Z, Y, X) '<f4' array.
-std::string writeNpyFloat32(const std::string& path, const std::vector<float>& values, const Coord& dims);
+Status writeNpyFloat32(const std::string& path, const std::vector<float>& values, const Coord& dims);
 
 /// Writes a uint8 mask (x-fastest) as a (Z, Y, X) '|u1' array.
-std::string writeNpyMask(const std::string& path, const std::vector<uint8_t>& mask, const Coord& dims);
+Status writeNpyMask(const std::string& path, const std::vector<uint8_t>& mask, const Coord& dims);
 
 /// Integer arrays of shape (Z, Y, X) (closest-feature ids), '<i4' or '<i8'; atomic like the others.
-std::string writeNpyInt32(const std::string& path, const std::vector<int32_t>& values, const Coord& dims);
-std::string writeNpyInt64(const std::string& path, const std::vector<int64_t>& values, const Coord& dims);
+Status writeNpyInt32(const std::string& path, const std::vector<int32_t>& values, const Coord& dims);
+Status writeNpyInt64(const std::string& path, const std::vector<int64_t>& values, const Coord& dims);
 
 }  // namespace distband

@@ -62,19 +62,20 @@ void pngError(png_structp png, png_const_charp msg) {
 void pngWarning(png_structp, png_const_charp) {}
 
 /// Encodes an RGB8 image into an open FILE. Kept free of C++ objects with destructors between setjmp and any
-/// longjmp (libpng's error path), as setjmp requires.
-std::string encodePng(std::FILE* file, int width, int height, png_bytepp rows) {
+/// longjmp (libpng's error path), as setjmp requires. kInternal when libpng cannot allocate its structures;
+/// kIoError for an error while writing (the image itself is valid by construction, so that is the file failing).
+Status encodePng(std::FILE* file, int width, int height, png_bytepp rows) {
   PngErrorState state;
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &state, pngError, pngWarning);
-  if (!png) return "libpng: cannot create write struct";
+  if (!png) return Status::Internal("libpng: cannot create write struct");
   png_infop info = png_create_info_struct(png);
   if (!info) {
     png_destroy_write_struct(&png, nullptr);
-    return "libpng: cannot create info struct";
+    return Status::Internal("libpng: cannot create info struct");
   }
   if (setjmp(png_jmpbuf(png))) {
     png_destroy_write_struct(&png, &info);
-    return std::string("libpng: ") + state.message;
+    return Status::IoError(std::string("libpng: ") + state.message);
   }
   png_init_io(png, file);
   png_set_IHDR(png, info, png_uint_32(width), png_uint_32(height), 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
@@ -83,18 +84,18 @@ std::string encodePng(std::FILE* file, int width, int height, png_bytepp rows) {
   png_write_image(png, rows);
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
-  return {};
+  return Status::Ok();
 }
 
 /// Writes through a temporary file in the target's directory, then renames it over `path`.
-std::string writePngAtomically(const std::string& path, RgbImage& image) {
+Status writePngAtomically(const std::string& path, RgbImage& image) {
   const int width = image.width, height = image.height;
   std::vector<png_bytep> rows(static_cast<size_t>(height));
   for (int r = 0; r < height; ++r) rows[size_t(r)] = image.pixel(0, r);
 
   std::string tmp;
   std::FILE* file = nullptr;
-  if (std::string err = openTempBeside(path, "wb", &tmp, &file); !err.empty()) return err;
+  if (Status s = openTempBeside(path, "wb", &tmp, &file); !s.ok()) return s;
   return commitTemp(file, tmp, path, encodePng(file, width, height, rows.data()));
 }
 
@@ -206,15 +207,15 @@ void drawColourBar(RgbImage* image, const Layout& l, const BarScale& bar, double
 
 }  // namespace
 
-std::string parseSliceSpec(std::string_view text, SliceSpec* spec) {
+Status parseSliceSpec(std::string_view text, SliceSpec* spec) {
   const size_t colon = text.find(':');
   if (colon == std::string_view::npos)
-    return fmt::format("slice must be AXIS:INDEX with AXIS x, y or z (got '{}')", text);
+    return Status::InvalidArgument(fmt::format("slice must be AXIS:INDEX with AXIS x, y or z (got '{}')", text));
   const std::string_view axis = text.substr(0, colon);
   const std::string_view index = text.substr(colon + 1);
   if (axis.size() != 1 || !std::strchr(kAxisNames, std::tolower(static_cast<unsigned char>(axis[0]))) ||
       axis[0] == '\0')
-    return fmt::format("slice axis must be x, y or z (got '{}')", axis);
+    return Status::InvalidArgument(fmt::format("slice axis must be x, y or z (got '{}')", axis));
   SliceSpec out;
   out.axis = int(std::strchr(kAxisNames, std::tolower(static_cast<unsigned char>(axis[0]))) - kAxisNames);
   if (index == "mid") {
@@ -223,21 +224,24 @@ std::string parseSliceSpec(std::string_view text, SliceSpec* spec) {
     int value = 0;
     const auto [end, ec] = std::from_chars(index.data(), index.data() + index.size(), value);
     if (index.empty() || ec != std::errc() || end != index.data() + index.size() || value < 0)
-      return fmt::format("slice index must be a non-negative integer or 'mid' (got '{}')", index);
+      return Status::InvalidArgument(
+          fmt::format("slice index must be a non-negative integer or 'mid' (got '{}')", index));
     out.index = value;
   }
   *spec = out;
-  return {};
+  return Status::Ok();
 }
 
-std::string resolveSlice(const Grid& grid, SliceSpec* spec) {
-  if (spec->axis < 0 || spec->axis > 2) return fmt::format("slice axis must be 0, 1 or 2 (got {})", spec->axis);
+Status resolveSlice(const Grid& grid, SliceSpec* spec) {
+  if (spec->axis < 0 || spec->axis > 2)
+    return Status::InvalidArgument(fmt::format("slice axis must be 0, 1 or 2 (got {})", spec->axis));
   const int extent = component(grid.dims(), spec->axis);
   if (spec->index == -1) spec->index = extent / 2;
   if (spec->index < 0 || spec->index >= extent)
-    return fmt::format("slice index {}:{} is outside the grid (valid: 0..{} along {})", kAxisNames[spec->axis],
-                       spec->index, extent - 1, kAxisNames[spec->axis]);
-  return {};
+    return Status::InvalidArgument(fmt::format("slice index {}:{} is outside the grid (valid: 0..{} along {})",
+                                               kAxisNames[spec->axis], spec->index, extent - 1,
+                                               kAxisNames[spec->axis]));
+  return Status::Ok();
 }
 
 Rgb8 sliceColour(float value, double limit_world) {
@@ -249,13 +253,15 @@ Rgb8 sliceColour(float value, double limit_world) {
           blend(kSliceZeroColour[2], end[2], a)};
 }
 
-std::string writeSlicePng(const std::string& path, const Grid& grid, const VoxelSampler& sample, SliceSpec spec,
-                          const SlicePngOptions& options, SlicePngInfo* info) {
-  if (std::string err = grid.validate(); !err.empty()) return "slice grid: " + err;
-  if (!sample) return "slice: no field to sample";
-  if (std::string err = resolveSlice(grid, &spec); !err.empty()) return err;
-  if (options.scale < 0) return fmt::format("slice scale must be >= 0 (got {})", options.scale);
-  if (std::isnan(options.contour_max_jump_world)) return "slice contour_max_jump_world must not be NaN";
+Status writeSlicePng(const std::string& path, const Grid& grid, const VoxelSampler& sample, SliceSpec spec,
+                     const SlicePngOptions& options, SlicePngInfo* info) {
+  if (Status s = grid.validate(); !s.ok()) return s.withPrefix("slice grid");
+  if (!sample) return Status::InvalidArgument("slice: no field to sample");
+  if (Status s = resolveSlice(grid, &spec); !s.ok()) return s;
+  if (options.scale < 0)
+    return Status::InvalidArgument(fmt::format("slice scale must be >= 0 (got {})", options.scale));
+  if (std::isnan(options.contour_max_jump_world))
+    return Status::InvalidArgument("slice contour_max_jump_world must not be NaN");
 
   int col_axis = 0, row_axis = 1;
   sliceAxes(spec.axis, &col_axis, &row_axis);
@@ -268,8 +274,8 @@ std::string writeSlicePng(const std::string& path, const Grid& grid, const Voxel
     scale = std::clamp((512 + edge - 1) / edge, 1, 16);
   }
   if (int64_t(cols) * scale > kSliceMaxImageEdge || int64_t(rows) * scale > kSliceMaxImageEdge)
-    return fmt::format("slice image {}x{} voxels at scale {} exceeds the {}-pixel edge limit", cols, rows, scale,
-                       kSliceMaxImageEdge);
+    return Status::ResourceExhausted(fmt::format("slice image {}x{} voxels at scale {} exceeds the {}-pixel edge limit",
+                                                 cols, rows, scale, kSliceMaxImageEdge));
 
   // Sample the slice once: values[r * cols + c], r = row coordinate (not yet flipped).
   std::vector<float> values(size_t(cols) * size_t(rows));
@@ -321,9 +327,10 @@ std::string writeSlicePng(const std::string& path, const Grid& grid, const Voxel
   const std::string title = sliceTitle(grid, spec, options);
   const Layout layout = layOut(cols * scale, rows * scale, options, title, bar, signed_bar);
   if (layout.width > kSliceMaxImageEdge || layout.height > kSliceMaxImageEdge)
-    return fmt::format("slice image {}x{} voxels at scale {} needs {}x{} pixels with its title and colour bar, "
-                       "which exceeds the {}-pixel edge limit",
-                       cols, rows, scale, layout.width, layout.height, kSliceMaxImageEdge);
+    return Status::ResourceExhausted(
+        fmt::format("slice image {}x{} voxels at scale {} needs {}x{} pixels with its title and colour bar, "
+                    "which exceeds the {}-pixel edge limit",
+                    cols, rows, scale, layout.width, layout.height, kSliceMaxImageEdge));
 
   RgbImage image(layout.width, layout.height, kSliceMarginColour);
   const PixelRect& area = layout.slice;
@@ -341,16 +348,16 @@ std::string writeSlicePng(const std::string& path, const Grid& grid, const Voxel
     drawText(&image, layout.title.left, layout.title.top, title, layout.text_scale, kSliceTextColour);
   if (options.draw_colour_bar) drawColourBar(&image, layout, bar, limit, options.units);
 
-  if (std::string err = writePngAtomically(path, image); !err.empty()) return err;
+  if (Status s = writePngAtomically(path, image); !s.ok()) return s;
   if (info)
     *info = {.width = layout.width, .height = layout.height, .scale = scale, .limit_world = limit,
              .contour_voxels = contour_voxels, .slice = layout.slice, .title = layout.title, .bar = layout.bar,
              .signed_bar = signed_bar, .text_scale = layout.text_scale};
-  return {};
+  return Status::Ok();
 }
 
-std::string writeSlicePng(const std::string& path, const DenseField& field, SliceSpec spec,
-                          const SlicePngOptions& options, SlicePngInfo* info) {
+Status writeSlicePng(const std::string& path, const DenseField& field, SliceSpec spec,
+                     const SlicePngOptions& options, SlicePngInfo* info) {
   return writeSlicePng(
       path, field.grid(), [&field](const Coord& c) { return field.at(c); }, spec, options, info);
 }

@@ -26,7 +26,10 @@
 //     cannot fit is an error. A title wider than that is cut off at the image edge.
 //   * The file is written to a temporary file in the same directory and renamed over `path`, so an
 //     interrupted run never leaves a partial PNG.
-//   * Errors (bad axis or index, bad options, I/O) come back as a non-empty message; nothing is thrown for them.
+//   * Errors come back as a Status, never thrown: kInvalidArgument for a bad grid, axis, index or option (a slice
+//     spec that does not parse, an index outside the grid, a negative scale, a NaN contour jump, no sampler);
+//     kResourceExhausted when the picture would exceed kSliceMaxImageEdge; kIoError when the OS cannot create,
+//     write or rename the file (libpng's write errors included); kInternal when libpng cannot set itself up.
 //   * Limited fields: a DenseField holds +background everywhere not delivered, so its inside beyond the limit
 //     shows as outside (the contour check above keeps that seam out of the contour). A VdbFieldBuilder grid after
 //     finish() (signed flood fill) reads -background there; sample it with
@@ -40,9 +43,10 @@
 #include <string>
 #include <string_view>
 
-#include "core/dense_field.h"
+#include "core/io/dense_field.h"
 #include "core/io/bitmap_font.h"
 #include "core/grid.h"
+#include "core/status.h"
 #include "core/types.h"
 
 namespace distband {
@@ -66,12 +70,13 @@ struct SliceSpec {
 };
 
 /// Parses "AXIS:INDEX" (axis x|y|z, case-insensitive; index a non-negative integer, or "mid" for the middle
-/// slice, resolved against a grid by resolveSlice). Returns "" on success, otherwise why not.
-/// A "mid" index is stored as -1.
-std::string parseSliceSpec(std::string_view text, SliceSpec* spec);
+/// slice, resolved against a grid by resolveSlice). Returns OK, or kInvalidArgument saying why not (`spec` is then
+/// untouched). A "mid" index is stored as -1.
+Status parseSliceSpec(std::string_view text, SliceSpec* spec);
 
-/// Checks the slice against the grid (and resolves index -1 = "mid" to dims/2). Returns "" or why not.
-std::string resolveSlice(const Grid& grid, SliceSpec* spec);
+/// Checks the slice against the grid (and resolves index -1 = "mid" to dims/2). Returns OK, or kInvalidArgument
+/// for an axis other than 0..2 or an index outside the grid.
+Status resolveSlice(const Grid& grid, SliceSpec* spec);
 
 /// Which colour bar a field gets: -limit..limit (signed) or 0..limit (unsigned).
 enum class SliceSign {
@@ -124,12 +129,12 @@ using VoxelSampler = std::function<float(const Coord&)>;
 /// Maps a value to its colour (exposed so tests and docs share the exact map).
 Rgb8 sliceColour(float value, double limit_world);
 
-/// Writes the slice `spec` of the field `sample` over `grid` to `path`. Returns "" on success.
-std::string writeSlicePng(const std::string& path, const Grid& grid, const VoxelSampler& sample, SliceSpec spec,
-                          const SlicePngOptions& options = {}, SlicePngInfo* info = nullptr);
+/// Writes the slice `spec` of the field `sample` over `grid` to `path`. Returns OK or a Status with the codes above.
+Status writeSlicePng(const std::string& path, const Grid& grid, const VoxelSampler& sample, SliceSpec spec,
+                     const SlicePngOptions& options = {}, SlicePngInfo* info = nullptr);
 
 /// Same for a dense field (its own grid).
-std::string writeSlicePng(const std::string& path, const DenseField& field, SliceSpec spec,
-                          const SlicePngOptions& options = {}, SlicePngInfo* info = nullptr);
+Status writeSlicePng(const std::string& path, const DenseField& field, SliceSpec spec,
+                     const SlicePngOptions& options = {}, SlicePngInfo* info = nullptr);
 
 }  // namespace distband

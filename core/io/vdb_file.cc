@@ -172,10 +172,13 @@ class FileOut {
     write(bytes);
     os_.seekp(end);
   }
-  std::string close() {
+  /// kIoError when any write (or the close) failed.
+  Status close() {
     os_.close();
-    if (!os_) return fmt::format("{}: cannot write the VDB file (disk full, or the path is not writable)", path_);
-    return {};
+    if (!os_)
+      return Status::IoError(
+          fmt::format("{}: cannot write the VDB file (disk full, or the path is not writable)", path_));
+    return Status::Ok();
   }
 
  private:
@@ -303,16 +306,16 @@ void writeGrid(FileOut& file, const VdbGridOut& g, const VdbTree<T>& tree, const
 
 }  // namespace
 
-std::string writeVdbFile(const std::string& path, const std::vector<VdbGridOut>& grids, const VdbTransformOut& xform) {
+Status writeVdbFile(const std::string& path, const std::vector<VdbGridOut>& grids, const VdbTransformOut& xform) {
   for (const VdbGridOut& g : grids) {
     const int trees = (g.float_tree != nullptr) + (g.int32_tree != nullptr) + (g.int64_tree != nullptr);
-    if (trees != 1) return fmt::format("{}: grid '{}' needs exactly one tree", path, g.name);
+    if (trees != 1) return Status::InvalidArgument(fmt::format("{}: grid '{}' needs exactly one tree", path, g.name));
     if ((g.float_tree && !g.float_tree->sealed()) || (g.int32_tree && !g.int32_tree->sealed()) ||
         (g.int64_tree && !g.int64_tree->sealed()))
-      return fmt::format("{}: grid '{}' is not sealed", path, g.name);
+      return Status::InvalidArgument(fmt::format("{}: grid '{}' is not sealed", path, g.name));
   }
   FileOut file(path);
-  if (!file.ok()) return fmt::format("{}: cannot open for writing", path);
+  if (!file.ok()) return Status::IoError(fmt::format("{}: cannot open for writing", path));
   std::string out;
   put(out, kVdbMagic);
   put(out, kFileVersion);

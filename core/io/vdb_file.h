@@ -8,8 +8,10 @@
 //   * Compression is OpenVDB's default: inactive values are not stored when a node has at most two of them
 //     (the inside/outside mask of a level set), and each node's stored values are Blosc-compressed (LZ4, byte
 //     shuffle, level 9), leaves in parallel on the caller's TBB arena.
-//   * Writes `path` directly (callers wanting atomicity write a temporary and rename it). Returns "" or a message
-//     naming the path and the problem; never throws for I/O.
+//   * Writes `path` directly (callers wanting atomicity write a temporary and rename it). Returns OK, or a Status
+//     whose message names the path and the problem, never throwing for I/O: kInvalidArgument for a grid without
+//     exactly one tree or with an unsealed tree (nothing is written then); kIoError when the OS cannot open or
+//     write the file.
 #pragma once
 
 #include <cstdint>
@@ -18,6 +20,7 @@
 #include <vector>
 
 #include "core/io/vdb_tree.h"
+#include "core/status.h"
 #include "core/types.h"
 
 namespace distband {
@@ -40,6 +43,6 @@ struct VdbTransformOut {
   Vec3d translation;  ///< world position of voxel (0, 0, 0)
 };
 
-std::string writeVdbFile(const std::string& path, const std::vector<VdbGridOut>& grids, const VdbTransformOut& xform);
+Status writeVdbFile(const std::string& path, const std::vector<VdbGridOut>& grids, const VdbTransformOut& xform);
 
 }  // namespace distband

@@ -112,7 +112,7 @@ void VdbFieldBuilder::finish() {
   if (closest64_) closest64_->seal();
 }
 
-std::string VdbFieldBuilder::write(const std::string& path) {
+Status VdbFieldBuilder::write(const std::string& path) {
   finish();
   VdbGridOut distance;
   distance.name = "distance";
@@ -133,16 +133,16 @@ std::string VdbFieldBuilder::write(const std::string& path) {
   }
   const std::string tmp = path + ".tmp";
   std::error_code ec;
-  if (std::string e = writeVdbFile(tmp, grids, {grid_.voxelSize(), grid_.origin()}); !e.empty()) {
+  if (Status s = writeVdbFile(tmp, grids, {grid_.voxelSize(), grid_.origin()}); !s.ok()) {
     std::filesystem::remove(tmp, ec);
-    return fmt::format("{}: cannot write the VDB file: {}", path, e);
+    return s.withPrefix(fmt::format("{}: cannot write the VDB file", path));
   }
   std::filesystem::rename(tmp, path, ec);
   if (ec) {
     std::filesystem::remove(tmp, ec);
-    return fmt::format("{}: cannot move the finished file into place: {}", path, ec.message());
+    return Status::IoError(fmt::format("{}: cannot move the finished file into place: {}", path, ec.message()));
   }
-  return {};
+  return Status::Ok();
 }
 
 }  // namespace distband

@@ -21,6 +21,7 @@
 #include "core/brick.h"
 #include "core/grid.h"
 #include "core/io/vdb_tree.h"
+#include "core/status.h"
 
 namespace distband {
 
@@ -40,8 +41,9 @@ class VdbFieldBuilder {
   void setRunState(bool complete, int segments);
   /// Flood-fills the signs of undelivered voxels; further add() calls are not allowed afterwards.
   void finish();
-  /// Writes the grid (finishing it first). Returns "" or a message naming the path and the problem.
-  std::string write(const std::string& path);
+  /// Writes the grid (finishing it first). Returns OK, or a Status whose message names the path and the problem:
+  /// kIoError when the OS cannot write the temporary file or rename it over `path`.
+  Status write(const std::string& path);
 
   int64_t activeVoxels() const { return distance_.activeVoxels(); }
   /// The distance at any voxel, delivered or not (after finish()).

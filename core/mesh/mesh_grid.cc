@@ -32,21 +32,21 @@ int paddingForLimit(const MeshGridOptions& o, double longest) {
 
 }  // namespace
 
-std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid* grid, GridPadding* padding_out) {
+Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid* grid, GridPadding* padding_out) {
   if ((o.voxel_size > 0) == (o.resolution > 0))
-    return "give exactly one of voxel size (> 0) and resolution (> 0)";
-  if (o.voxel_size > 0 && !std::isfinite(o.voxel_size)) return "voxel size must be finite";
+    return Status::InvalidArgument("give exactly one of voxel size (> 0) and resolution (> 0)");
+  if (o.voxel_size > 0 && !std::isfinite(o.voxel_size)) return Status::InvalidArgument("voxel size must be finite");
   if (o.padding_voxels && (*o.padding_voxels < 0 || *o.padding_voxels > kMaxPaddingVoxels))
-    return fmt::format("padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, *o.padding_voxels);
-  if (o.box_min.has_value() != o.box_max.has_value()) return "an explicit box needs both its min and max corner";
+    return Status::InvalidArgument(fmt::format("padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, *o.padding_voxels));
+  if (o.box_min.has_value() != o.box_max.has_value()) return Status::InvalidArgument("an explicit box needs both its min and max corner");
   Vec3d lo, hi;
   if (o.box_min) {
     lo = *o.box_min, hi = *o.box_max;
     for (double v : {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z})
-      if (!std::isfinite(v)) return "the box corners must be finite";
-    if (!(hi.x >= lo.x && hi.y >= lo.y && hi.z >= lo.z)) return "the box max corner must be >= its min corner";
+      if (!std::isfinite(v)) return Status::InvalidArgument("the box corners must be finite");
+    if (!(hi.x >= lo.x && hi.y >= lo.y && hi.z >= lo.z)) return Status::InvalidArgument("the box max corner must be >= its min corner");
   } else {
-    if (mesh.vertices.empty()) return "the mesh is empty";
+    if (mesh.vertices.empty()) return Status::InvalidArgument("the mesh is empty");
     lo = hi = mesh.vertices[0];
     for (const Vec3d& v : mesh.vertices) {
       lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
@@ -55,7 +55,7 @@ std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid
   }
   const Vec3d ext = hi - lo;
   const double longest = std::max({ext.x, ext.y, ext.z});
-  if (o.resolution > kMaxGridDim) return fmt::format("resolution must be <= {} (got {})", kMaxGridDim, o.resolution);
+  if (o.resolution > kMaxGridDim) return Status::InvalidArgument(fmt::format("resolution must be <= {} (got {})", kMaxGridDim, o.resolution));
   GridPadding padding;
   if (o.padding_voxels) {
     padding.voxels = *o.padding_voxels;
@@ -68,9 +68,9 @@ std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid
   if (o.resolution > 0) {
     const int span = o.resolution - 1 - 2 * padding.voxels;
     if (span < 1)
-      return fmt::format("resolution {} leaves no voxel inside a padding of {} on both sides", o.resolution,
-                         padding.voxels);
-    if (!(longest > 0)) return "the box has zero extent, so a resolution cannot size it (give a voxel size)";
+      return Status::InvalidArgument(fmt::format("resolution {} leaves no voxel inside a padding of {} on both sides", o.resolution,
+                         padding.voxels));
+    if (!(longest > 0)) return Status::InvalidArgument("the box has zero extent, so a resolution cannot size it (give a voxel size)");
     h = longest / span;
   }
   if (!o.box_min) {
@@ -85,13 +85,13 @@ std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid
   };
   const double nx = count(ext.x), ny = count(ext.y), nz = count(ext.z);
   if (std::max({nx, ny, nz}) > kMaxGridDim)
-    return fmt::format("the grid would be {:.0f}x{:.0f}x{:.0f} voxels; at most {} per axis are allowed", nx, ny, nz,
-                       kMaxGridDim);
+    return Status::InvalidArgument(fmt::format(
+        "the grid would be {:.0f}x{:.0f}x{:.0f} voxels; at most {} per axis are allowed", nx, ny, nz, kMaxGridDim));
   Grid g(lo - Vec3d{pad * h, pad * h, pad * h}, h, {int(nx), int(ny), int(nz)});
-  if (std::string e = g.validate(); !e.empty()) return e;
+  if (Status s = g.validate(); !s.ok()) return s;
   *grid = g;
   if (padding_out) *padding_out = padding;
-  return {};
+  return Status::Ok();
 }
 
 }  // namespace distband

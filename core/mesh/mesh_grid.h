@@ -10,7 +10,7 @@
 // resolution, the padding it takes is capped so the bounds keep at least half of the N voxels (then the band is
 // clipped, and the result says so). Around an explicit box the default is 0 (the box is the region asked for).
 // An explicit padding wins; `band_clipped` reports when it is smaller than the limit.
-// Returns "" or a message naming the option and the rule it breaks. Pure function.
+// Returns OK or kInvalidArgument naming the option and the rule it breaks. Pure function.
 #pragma once
 
 #include <limits>
@@ -19,6 +19,7 @@
 
 #include "core/grid.h"
 #include "core/mesh/triangle_mesh.h"
+#include "core/status.h"
 
 namespace distband {
 
@@ -43,7 +44,7 @@ struct GridPadding {
   bool band_clipped = false;  ///< fitted around the bounds with a padding below the limit in voxels
 };
 
-std::string gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& options, Grid* grid,
+Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& options, Grid* grid,
                         GridPadding* padding = nullptr);
 
 }  // namespace distband

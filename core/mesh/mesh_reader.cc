@@ -5,7 +5,7 @@
 
 #include <fmt/format.h>
 
-#include "core/mesh/mesh_reader_internal.h"
+#include "core/mesh/internal/mesh_reader_parts.h"
 
 namespace distband {
 
@@ -87,10 +87,8 @@ Status readMesh(std::string_view bytes, MeshFormat format, const MeshReadLimits&
   m.triangles = std::move(raw.triangles);
   MeshReport r;
   r.non_triangles = raw.non_triangles;
-  if (std::string e = validateMesh(&m, &r, interrupter); !e.empty()) {
-    if (isInterrupted(interrupter)) return interrupter->status();
-    return Status::InvalidArgument(fmt::format("{}: {}", meshFormatName(format), e));
-  }
+  if (Status s = validateMesh(&m, &r, interrupter); !s.ok())
+    return isInterrupted(interrupter) ? s : s.withPrefix(meshFormatName(format));
   r.degenerate += raw.degenerate;
   if (uint64_t(r.vertices) > limits.max_vertices)
     return Status::ResourceExhausted(fmt::format("{}: the mesh has {} vertices, more than the server's limit of {}",

@@ -9,7 +9,7 @@
 //     is checked against the bytes actually present and against `limits` before anything is allocated for it; OBJ
 //     and ascii STL, which declare nothing, are counted in a first pass for the same purpose. So memory is bounded
 //     by the input: readMesh allocates at most meshReadPeakBytes(bytes.size()) (measured by
-//     tests/core/mesh_reader_test.cc with a counting allocator).
+//     tests/core/mesh/mesh_reader_test.cc with a counting allocator).
 //   * Errors: kInvalidArgument for a file that breaks its format (truncated, inconsistent, out-of-range index,
 //     non-finite coordinate), kResourceExhausted for a count beyond `limits`, or the interrupter's status. Messages
 //     name the element and the line (text) or byte offset (binary), e.g. "PLY element 'face' 12 (byte 1234): ...",

@@ -6,7 +6,7 @@
 // the limits are checked and the arrays sized before anything is stored.
 #include <fmt/format.h>
 
-#include "core/mesh/mesh_reader_internal.h"
+#include "core/mesh/internal/mesh_reader_parts.h"
 
 namespace distband::mesh_internal {
 namespace {

@@ -5,7 +5,7 @@
 // at least 2 per value) and against the limits before anything is allocated.
 #include <fmt/format.h>
 
-#include "core/mesh/mesh_reader_internal.h"
+#include "core/mesh/internal/mesh_reader_parts.h"
 
 namespace distband::mesh_internal {
 namespace {

@@ -12,7 +12,7 @@
 
 #include <fmt/format.h>
 
-#include "core/mesh/mesh_reader_internal.h"
+#include "core/mesh/internal/mesh_reader_parts.h"
 
 namespace distband::mesh_internal {
 namespace {

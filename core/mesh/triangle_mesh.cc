@@ -33,20 +33,20 @@ std::string MeshReport::summary() const {
                      non_triangles ? fmt::format(", {} point/line primitives skipped", non_triangles) : "");
 }
 
-std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* interrupter) {
+Status validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* interrupter) {
   MeshReport r;
-  if (mesh->vertices.empty() || mesh->triangles.empty()) return "the mesh has no triangles";
-  if (mesh->vertices.size() >= UINT32_MAX) return "the mesh has too many vertices";
+  if (mesh->vertices.empty() || mesh->triangles.empty()) return Status::InvalidArgument("the mesh has no triangles");
+  if (mesh->vertices.size() >= UINT32_MAX) return Status::InvalidArgument("the mesh has too many vertices");
   for (size_t i = 0; i < mesh->vertices.size(); ++i) {
     const Vec3d& v = mesh->vertices[i];
     if (!(std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z)))
-      return fmt::format("vertex {} has a non-finite coordinate ({}, {}, {})", i, v.x, v.y, v.z);
+      return Status::InvalidArgument(fmt::format("vertex {} has a non-finite coordinate ({}, {}, {})", i, v.x, v.y, v.z));
   }
   const size_t nv = mesh->vertices.size();
   for (size_t t = 0; t < mesh->triangles.size(); ++t)
     for (uint32_t idx : mesh->triangles[t])
-      if (idx >= nv) return fmt::format("triangle {} refers to vertex {} but there are {} vertices", t, idx, nv);
-  if (isInterrupted(interrupter)) return "interrupted";
+      if (idx >= nv) return Status::InvalidArgument(fmt::format("triangle {} refers to vertex {} but there are {} vertices", t, idx, nv));
+  if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
 
   // Weld identical positions: sort vertex ids by position (4 bytes a vertex, not a hash table), map each to the
   // first of its run. Welded ids follow first use below, so the order of the input decides the output.
@@ -58,7 +58,7 @@ std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupt
       return pa != pb ? pa < pb : a < b;
     });
   });
-  if (!sorted) return "interrupted";
+  if (!sorted) return interruptedStatus(interrupter);
   for (size_t i = 0; i < nv;) {
     size_t j = i;
     const auto key = positionBits(mesh->vertices[order[i]]);
@@ -66,7 +66,7 @@ std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupt
     i = j;
   }
   std::vector<uint32_t>().swap(order);
-  if (isInterrupted(interrupter)) return "interrupted";
+  if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
 
   // Drop degenerate triangles (repeated corner, or zero area relative to the longest edge), in place.
   size_t kept = 0;
@@ -84,7 +84,7 @@ std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupt
   }
   mesh->triangles.resize(kept);
   mesh->triangles.shrink_to_fit();
-  if (kept == 0) return fmt::format("all {} triangles are degenerate (zero area)", r.degenerate);
+  if (kept == 0) return Status::InvalidArgument(fmt::format("all {} triangles are degenerate (zero area)", r.degenerate));
   // Keep only referenced vertices, numbered by first use.
   std::vector<uint32_t>& used = remap;  // reused: old id -> new id
   std::fill(used.begin(), used.end(), UINT32_MAX);
@@ -100,7 +100,7 @@ std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupt
   std::vector<uint32_t>().swap(remap);
   std::vector<Vec3d>().swap(mesh->vertices);
   vertices.shrink_to_fit();
-  if (isInterrupted(interrupter)) return "interrupted";
+  if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   // Edge statistics.
   std::vector<uint64_t> edges;
   edges.reserve(mesh->triangles.size() * 3);
@@ -109,7 +109,7 @@ std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupt
       const uint64_t a = t[e], b = t[(e + 1) % 3];
       edges.push_back(std::min(a, b) << 32 | std::max(a, b));
     }
-  if (!runInterruptible(interrupter, [&] { tbb::parallel_sort(edges.begin(), edges.end()); })) return "interrupted";
+  if (!runInterruptible(interrupter, [&] { tbb::parallel_sort(edges.begin(), edges.end()); })) return interruptedStatus(interrupter);
   for (size_t i = 0; i < edges.size();) {
     size_t j = i;
     while (j < edges.size() && edges[j] == edges[i]) ++j;
@@ -129,30 +129,31 @@ std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupt
     r.non_triangles = report->non_triangles;
     *report = r;
   }
-  return {};
+  return Status::Ok();
 }
 
-std::string loadMesh(const std::string& path, TriangleMesh* mesh, MeshReport* report) {
-  auto fail = [&](const std::string& problem) { return fmt::format("{}: {}", path, problem); };
+Status loadMesh(const std::string& path, TriangleMesh* mesh, MeshReport* report) {
+  auto fail = [&](const std::string& problem) { return Status::InvalidArgument(fmt::format("{}: {}", path, problem)); };
   MeshFormat format;
   if (!meshFormatFromPath(path, &format))
     return fail("unsupported mesh format (expected .obj, .off, .ply or .stl)");
   struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return fail("no such file");
+  if (::stat(path.c_str(), &st) != 0) return Status::NotFound(fmt::format("{}: no such file", path));
   if (!S_ISREG(st.st_mode)) return fail("not a regular file");
   if (st.st_size == 0) return fail("the file is empty");
   if (uint64_t(st.st_size) > kMaxMeshFileBytes)
     return fail(fmt::format("the file has {} bytes, more than the {} a mesh may have", st.st_size, kMaxMeshFileBytes));
   std::string bytes(size_t(st.st_size), '\0');
   std::ifstream in(path, std::ios::binary);
-  if (!in.read(bytes.data(), std::streamsize(bytes.size()))) return fail("cannot read the file");
+  if (!in.read(bytes.data(), std::streamsize(bytes.size())))
+    return Status::IoError(fmt::format("{}: cannot read the file", path));
   MeshReadLimits limits;
   TriangleMesh loaded;
   MeshReport r;
-  if (Status s = readMesh(bytes, format, limits, nullptr, &loaded, &r); !s.ok()) return fail(s.message());
+  if (Status s = readMesh(bytes, format, limits, nullptr, &loaded, &r); !s.ok()) return s.withPrefix(path);
   *mesh = std::move(loaded);
   if (report) *report = r;
-  return {};
+  return Status::Ok();
 }
 
 }  // namespace distband

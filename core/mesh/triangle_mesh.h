@@ -2,8 +2,9 @@
 // Contract: after loadMesh() or validateMesh() succeed, the mesh is non-empty, every coordinate is finite, every
 // index is < vertices.size(), no triangle has zero area, and vertices that share an exact position are welded
 // (so edges shared by triangles from different file groups are recognised as shared). MeshReport says what was
-// found, including what was dropped. Errors are returned as strings that name the file and the problem; malformed
-// input never asserts or crashes. Plain value types; not synchronised.
+// found, including what was dropped. Errors are a Status (kInvalidArgument for malformed input, kNotFound for a
+// missing file, kIoError for a file that cannot be read, the interrupter's status when it stopped the work) whose
+// message names the file and the problem; malformed input never asserts or crashes. Plain value types; not synchronised.
 #pragma once
 
 #include <array>
@@ -12,6 +13,7 @@
 #include <vector>
 
 #include "core/interrupter.h"
+#include "core/status.h"
 #include "core/types.h"
 
 namespace distband {
@@ -38,14 +40,14 @@ struct MeshReport {
 inline constexpr uint64_t kMaxMeshFileBytes = uint64_t(4) << 30;
 
 /// Loads a regular file `path` (.obj .off .ply .stl, by extension) into memory and parses it with readMesh
-/// (core/mesh/mesh_reader.h: polygons fanned, identical vertices welded, validated). Returns "" on success;
-/// otherwise "<path>: <problem>" and leaves `mesh` untouched. `report` may be null.
-std::string loadMesh(const std::string& path, TriangleMesh* mesh, MeshReport* report);
+/// (core/mesh/mesh_reader.h: polygons fanned, identical vertices welded, validated). On error the message is
+/// "<path>: <problem>" and `mesh` is untouched. `report` may be null.
+Status loadMesh(const std::string& path, TriangleMesh* mesh, MeshReport* report);
 
 /// Validates an in-memory mesh in place: rejects an empty mesh, non-finite coordinates and out-of-range
 /// indices; welds identical positions, drops degenerate triangles and unreferenced vertices, and fills `report`
-/// (may be null). Returns "" on success, otherwise the problem (the mesh is then unspecified; "interrupted" when
-/// `interrupter` stopped it). Memory: ~40 bytes per vertex and 24 per triangle beyond the mesh itself.
-std::string validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* interrupter = nullptr);
+/// (may be null). On error the mesh is unspecified (the interrupter's status when it stopped the work). Memory: ~40
+/// bytes per vertex and 24 per triangle beyond the mesh itself.
+Status validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* interrupter = nullptr);
 
 }  // namespace distband

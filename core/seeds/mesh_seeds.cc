@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <chrono>
+#include <stdexcept>
 #include <cmath>
 #include <memory>
 
@@ -361,21 +362,21 @@ namespace {
 // makeMeshSeeds' work, run under runInterruptible (every TBB task it starts stops when the interrupter trips); its
 // serial loops poll too. TBB only cancels tasks not yet started, and a parallel_for hands a thread ranges of up to
 // 1/(4 x threads) of the loop (hundreds of ms at 1024^3), so loop bodies check is_current_task_group_canceling().
-std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
+Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
                            MeshSeedStats* stats) {
   const auto start = std::chrono::steady_clock::now();
   const Interrupter* interrupter = options.interrupter;
-  if (std::string e = grid.validate(); !e.empty()) return "grid: " + e;
-  if (mesh.triangles.empty()) return "the mesh has no triangles";
+  if (Status s = grid.validate(); !s.ok()) return s.withPrefix("grid");
+  if (mesh.triangles.empty()) return Status::InvalidArgument("the mesh has no triangles");
   if (!(options.band_radius_voxels > 0 && options.band_radius_voxels <= 8))
-    return fmt::format("band radius must be in (0, 8] voxels (got {})", options.band_radius_voxels);
-  if (!(options.limit_voxels > 0)) return fmt::format("limit must be > 0 (got {})", options.limit_voxels);
-  if (options.sign == SignMethod::kAuto) return "the sign method auto must be resolved first (resolveSignMethod)";
+    return Status::InvalidArgument(fmt::format("band radius must be in (0, 8] voxels (got {})", options.band_radius_voxels));
+  if (!(options.limit_voxels > 0)) return Status::InvalidArgument(fmt::format("limit must be > 0 (got {})", options.limit_voxels));
+  if (options.sign == SignMethod::kAuto) throw std::invalid_argument("makeMeshSeeds: the sign method auto must be resolved first (resolveSignMethod)");
   for (const auto& t : mesh.triangles)
     for (uint32_t i : t)
-      if (i >= mesh.vertices.size()) return "a triangle refers to a vertex that does not exist";
+      if (i >= mesh.vertices.size()) return Status::InvalidArgument("a triangle refers to a vertex that does not exist");
   const size_t nt = mesh.triangles.size();
-  if (nt >= kNoSite) return "too many triangles";
+  if (nt >= kNoSite) return Status::ResourceExhausted(fmt::format("the mesh has {} triangles, more than the engine's {} sites", nt, kNoSite - 1));
 
   // Index-space copies, in parallel: serial, these loops were ~20 ms of a 52 k-triangle mesh's seeds.
   std::vector<Vec3d> verts(mesh.vertices.size());  // index space
@@ -391,7 +392,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
       normals[t] = normalized((tris[t][1] - tris[t][0]).cross(tris[t][2] - tris[t][0]));
     }
   });
-  if (isInterrupted(interrupter)) return "interrupted";
+  if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   const double radius = std::min(options.band_radius_voxels, options.limit_voxels);
   const double r2 = radius * radius;
   const Coord dims = grid.dims();
@@ -418,7 +419,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
                      ((hi.z >> 3) - (lo.z >> 3) + 1);
   });
   for (size_t t = 0; t < nt; ++t) offsets[t + 1] += offsets[t];
-  if (isInterrupted(interrupter)) return "interrupted";
+  if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   std::vector<Candidate> cand(offsets[nt]);
   tbb::parallel_for(size_t(0), nt, [&](size_t t) {
     Coord lo, hi;
@@ -432,7 +433,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
   tbb::parallel_sort(cand.begin(), cand.end(), [](const Candidate& a, const Candidate& b) {
     return a.brick < b.brick || (a.brick == b.brick && a.tri < b.tri);
   });
-  if (isInterrupted(interrupter)) return "interrupted";
+  if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   std::vector<size_t> starts;
   for (size_t i = 0; i < cand.size(); ++i)
     if (i == 0 || cand[i].brick != cand[i - 1].brick) starts.push_back(i);
@@ -500,7 +501,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
     for (int o = 0; o < kBrickVoxels; ++o)
       if (best_t[o] != kNoSite) v.push_back({borg + brickLocal(o), best_t[o]});
   });
-  if (isInterrupted(interrupter)) return "interrupted";
+  if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   const size_t scratch_bytes = cand.size() * sizeof(Candidate);
   std::vector<Candidate>().swap(cand);
   std::vector<size_t> band_at(nbricks + 1, 0);
@@ -514,7 +515,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
   seeds.band.reserve(band_at[nbricks]);
   touchPages(seeds.band.data(), band_at[nbricks] * sizeof(BandVoxel));
   for (size_t size = 0; size < band_at[nbricks];) {
-    if (isInterrupted(interrupter)) return "interrupted";
+    if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
     size = std::min(band_at[nbricks], size + (size_t(256) << 10));
     seeds.band.resize(size);
   }
@@ -524,7 +525,7 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
     std::vector<BandVoxel>().swap(per_brick[b]);
   });
   std::vector<std::vector<BandVoxel>>().swap(per_brick);
-  if (isInterrupted(interrupter)) return "interrupted";
+  if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
 
   auto signer = std::make_shared<MeshSigner>();
   signer->voxel_size = grid.voxelSize();
@@ -561,11 +562,11 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
       break;
     case SignMethod::kParity:
       signer->parity = std::make_unique<ParityScene>(tris, interrupter);
-      if (isInterrupted(interrupter)) return "interrupted";
-      if (!signer->parity->ok()) return "cannot create the Embree device for parity signs";
+      if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
+      if (!signer->parity->ok()) return Status::Internal("cannot create the Embree device for parity signs");
       break;
   }
-  if (isInterrupted(interrupter)) return "interrupted";
+  if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   if (options.sign != SignMethod::kUnsigned)
     seeds.sign = [signer](Brick& brick, const uint32_t* sites) { signer->sign(brick, sites); };
   if (seeds.kind == SiteKind::kTriangle) seeds.triangles = std::move(tris);
@@ -579,19 +580,19 @@ std::string buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const Mes
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   *out = std::move(seeds);
-  return {};
+  return Status::Ok();
 }
 
 }  // namespace
 
-std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
-                          MeshSeedStats* stats) {
-  std::string error;
+Status makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
+                     MeshSeedStats* stats) {
+  Status status;
   Seeds seeds;
-  if (!runInterruptible(options.interrupter, [&] { error = buildMeshSeeds(grid, mesh, options, &seeds, stats); }))
-    return "interrupted";
-  if (error.empty()) *out = std::move(seeds);
-  return error;
+  if (!runInterruptible(options.interrupter, [&] { status = buildMeshSeeds(grid, mesh, options, &seeds, stats); }))
+    return interruptedStatus(options.interrupter);
+  if (status.ok()) *out = std::move(seeds);
+  return status;
 }
 
 }  // namespace distband

@@ -16,7 +16,8 @@
 //   * kParity: Embree rays in 3 fixed directions, inside when the majority cross the surface an odd number of times.
 //   For winding and parity a voxel at unsigned distance d decides the sign of the voxels within d - 1 of it in
 //   the same brick (no surface lies between them), which saves most evaluations away from the surface.
-// Errors (empty mesh, invalid grid or options) come back as a message; `out` is then untouched.
+// Errors come back as a Status, `out` then untouched: kInvalidArgument (empty mesh, invalid grid or options),
+// kResourceExhausted (more triangles than the engine has site ids), the interrupter's status when it stopped.
 #pragma once
 
 #include <cstdint>
@@ -27,7 +28,8 @@
 #include "core/grid.h"
 #include "core/interrupter.h"
 #include "core/mesh/triangle_mesh.h"
-#include "core/seeds.h"
+#include "core/seeds/seeds.h"
+#include "core/status.h"
 
 namespace distband {
 
@@ -55,7 +57,7 @@ struct MeshSeedOptions {
   double band_radius_voxels = 1.5;  ///< initial band: voxels within this distance of a triangle, in (0, 8]
   double limit_voxels = std::numeric_limits<double>::infinity();  ///< band voxels beyond are dropped
   /// Polled throughout (the scan, sorts, sign tables, the winding-number tree, Embree's BVH build); when it trips,
-  /// makeMeshSeeds returns "interrupted".
+  /// makeMeshSeeds returns the interrupter's status.
   const Interrupter* interrupter = nullptr;
 };
 
@@ -65,7 +67,7 @@ struct MeshSeedStats {
   double seconds = 0;
 };
 
-std::string makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
-                          MeshSeedStats* stats = nullptr);
+Status makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
+                     MeshSeedStats* stats = nullptr);
 
 }  // namespace distband

@@ -7,9 +7,9 @@
 
 namespace distband {
 
-std::string makePointSeeds(const Grid& grid, const std::vector<Vec3d>& world_points, Seeds* out,
+Status makePointSeeds(const Grid& grid, const std::vector<Vec3d>& world_points, Seeds* out,
                            const VoxelBox* window) {
-  if (world_points.empty()) return "point list is empty";
+  if (world_points.empty()) return Status::InvalidArgument("point list is empty");
   Seeds seeds;
   seeds.kind = SiteKind::kPoint;
   const VoxelBox box = window ? *window : grid.box();
@@ -19,7 +19,7 @@ std::string makePointSeeds(const Grid& grid, const std::vector<Vec3d>& world_poi
   for (size_t i = 0; i < world_points.size(); ++i) {
     const Vec3d& w = world_points[i];
     if (!(std::isfinite(w.x) && std::isfinite(w.y) && std::isfinite(w.z)))
-      return fmt::format("point {} has a non-finite coordinate", i);
+      return Status::InvalidArgument(fmt::format("point {} has a non-finite coordinate", i));
     const Vec3d p = grid.indexOf(w);
     seeds.points.push_back(p);
     auto nearest = [](double v, int lo, int n) {
@@ -34,7 +34,7 @@ std::string makePointSeeds(const Grid& grid, const std::vector<Vec3d>& world_poi
         }
   }
   *out = std::move(seeds);
-  return {};
+  return Status::Ok();
 }
 
 }  // namespace distband

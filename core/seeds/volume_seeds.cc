@@ -25,13 +25,13 @@ struct Slice {
 }  // namespace
 
 // Nothing here allocates per grid voxel beyond the signed case's region (1 byte a voxel, which the engine needs): a
-// dense table of site ids (4 bytes a voxel, 4 GiB at 1024^3) used to stand here, and filling it, one thread
-// first-touching every page, took seconds that a cancel could not interrupt.
+// dense table of site ids would take 4 bytes a voxel (4 GiB at 1024^3), and filling it, one thread first-touching
+// every page, seconds that a cancel could not interrupt.
 namespace {
 
 // Whether any byte of `mask` is nonzero (want_zero = false) or zero (true): 8 bytes a step, 1 MiB slices on the
-// caller's TBB arena, every slice stopping once one found it (a whole-grid field read 128 MiB here one byte at a
-// time on one thread: 0.5 % of a 1-thread run, a serial part that 16 threads would not share).
+// caller's TBB arena, every slice stopping once one found it (one byte at a time on one thread, a whole-grid field's
+// 128 MiB would be 0.5 % of a 1-thread run, a serial part that 16 threads would not share).
 bool maskHas(const std::vector<uint8_t>& mask, bool want_zero) {
   constexpr size_t kSlice = size_t(1) << 20;
   std::atomic<bool> found{false};
@@ -59,16 +59,16 @@ bool maskHas(const std::vector<uint8_t>& mask, bool want_zero) {
 
 }  // namespace
 
-std::string checkSeedMask(const std::vector<uint8_t>& mask, bool signed_distance) {
-  if (!maskHas(mask, false)) return "the seed mask has no nonzero voxel";
-  if (signed_distance && !maskHas(mask, true)) return "the seed mask has no zero voxel, so a signed field is undefined";
-  return {};
+Status checkSeedMask(const std::vector<uint8_t>& mask, bool signed_distance) {
+  if (!maskHas(mask, false)) return Status::InvalidArgument("the seed mask has no nonzero voxel");
+  if (signed_distance && !maskHas(mask, true)) return Status::InvalidArgument("the seed mask has no zero voxel, so a signed field is undefined");
+  return Status::Ok();
 }
 
-std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out,
+Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out,
                             const Interrupter* interrupter) {
   if (static_cast<int64_t>(mask.size()) != grid.voxelCount())
-    return fmt::format("mask has {} voxels, the grid {}", mask.size(), grid.voxelCount());
+    return Status::InvalidArgument(fmt::format("mask has {} voxels, the grid {}", mask.size(), grid.voxelCount()));
   const Coord d = grid.dims();
   const int64_t sy = d.x, sz = int64_t(d.x) * d.y;
   auto inside = [&](int64_t i) { return mask[i] != 0; };
@@ -95,13 +95,14 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
         if (!signed_distance) s.band.push_back({{x, y, z}, boundary ? uint32_t(s.boundary.size() - 1) : kNoSite});
       }
   });
-  if (stop()) return "interrupted";
+  if (stop()) return interruptedStatus(interrupter);
   std::vector<uint32_t> first_site(slices.size() + 1, 0);
   int64_t n_inside = 0;
   for (size_t z = 0; z < slices.size(); ++z) {
     n_inside += slices[z].inside;
     const uint64_t next = uint64_t(first_site[z]) + slices[z].boundary.size();
-    if (next >= kNoSite) return fmt::format("the seed mask has more than {} boundary voxels", kNoSite - 1);
+    if (next >= kNoSite)
+      return Status::ResourceExhausted(fmt::format("the seed mask has more than {} boundary voxels", kNoSite - 1));
     first_site[z + 1] = uint32_t(next);
   }
   if (n_inside == 0 || (signed_distance && n_inside == grid.voxelCount())) return checkSeedMask(mask, signed_distance);
@@ -135,7 +136,7 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
         s.band.push_back({{x, y, z}, best});
       }
     });
-    if (stop()) return "interrupted";
+    if (stop()) return interruptedStatus(interrupter);
   }
 
   // 3. Concatenate, slice by slice with a poll between slices (the copies first-touch fresh memory on one thread),
@@ -148,7 +149,7 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
   seeds.points.reserve(first_site.back());
   seeds.band.reserve(band_total);
   for (size_t z = 0; z < slices.size(); ++z) {
-    if (stop()) return "interrupted";
+    if (stop()) return interruptedStatus(interrupter);
     Slice& s = slices[z];
     for (const int64_t i : s.boundary) seeds.points.push_back({double(i % sy), double((i / sy) % d.y), double(z)});
     for (BandVoxel v : s.band) {
@@ -166,7 +167,7 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
     region->reserve(mask.size());
     constexpr size_t kStep = size_t(4) << 20;
     for (size_t i = 0; i < mask.size(); i += kStep) {
-      if (stop()) return "interrupted";
+      if (stop()) return interruptedStatus(interrupter);
       const size_t end = std::min(mask.size(), i + kStep);
       std::transform(mask.begin() + int64_t(i), mask.begin() + int64_t(end), std::back_inserter(*region),
                      [](uint8_t m) { return uint8_t(m != 0); });
@@ -182,7 +183,7 @@ std::string makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, 
     };
   }
   *out = std::move(seeds);
-  return {};
+  return Status::Ok();
 }
 
 }  // namespace distband

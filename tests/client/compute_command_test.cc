@@ -19,6 +19,7 @@
 #include "client/cli.h"
 #include "core/io/npy.h"
 #include "core/mesh/triangle_mesh.h"
+#include "tests/support/status_testing.h"
 #include "tests/support/brute_mesh.h"
 
 namespace distband {
@@ -49,7 +50,7 @@ TEST(ComputeCommandTest, PointsToNpy) {
   EXPECT_NE(r.out.find("done:"), std::string::npos) << r.out;
   std::vector<float> v;
   Coord d;
-  ASSERT_EQ(readNpyFloat32(out, &v, &d), "");
+  ASSERT_TRUE(IsOk(readNpyFloat32(out, &v, &d)));
   EXPECT_EQ(d, (Coord{16, 14, 12}));
   // Exact mode is the default: compare with the analytic distance to the nearer point.
   double max_err = 0;
@@ -72,13 +73,13 @@ TEST(ComputeCommandTest, LimitBackgroundAndSignedVolume) {
     for (int y = 3; y <= 14; ++y)
       for (int x = 3; x <= 16; ++x) mask[(size_t(z) * dims.y + y) * dims.x + x] = 1;
   const std::string in = tmp("box.npy"), out = tmp("box_field.npy"), meta = tmp("box_field.json");
-  ASSERT_EQ(writeNpyMask(in, mask, dims), "");
+  ASSERT_TRUE(IsOk(writeNpyMask(in, mask, dims)));
   const CliResult r = run({"compute", "--volume", in, "--signed", "--limit", "2", "--segment", "1", "--out", out,
                            "--meta", meta});
   ASSERT_EQ(r.code, 0) << r.err;
   std::vector<float> v;
   Coord d;
-  ASSERT_EQ(readNpyFloat32(out, &v, &d), "");
+  ASSERT_TRUE(IsOk(readNpyFloat32(out, &v, &d)));
   ASSERT_EQ(d, dims);
   auto at = [&](int x, int y, int z) { return v[(size_t(z) * dims.y + y) * dims.x + x]; };
   EXPECT_EQ(at(0, 0, 0), 2.0f);     // outside, beyond the limit: +limit
@@ -111,8 +112,8 @@ TEST(ComputeCommandTest, LimitInVoxelsIsTheLimitTimesTheVoxelSize) {
   EXPECT_NE(r.out.find("limit 2,"), std::string::npos) << r.out;  // reported in world units
   std::vector<float> va, vb;
   Coord d;
-  ASSERT_EQ(readNpyFloat32(a, &va, &d), "");
-  ASSERT_EQ(readNpyFloat32(b, &vb, &d), "");
+  ASSERT_TRUE(IsOk(readNpyFloat32(a, &va, &d)));
+  ASSERT_TRUE(IsOk(readNpyFloat32(b, &vb, &d)));
   EXPECT_EQ(va, vb);
   EXPECT_EQ(with({"--limit", "2", "--limit-voxels", "4", "--out", b}).code, 2);
   EXPECT_NE(with({"--limit-voxels", "-1", "--out", b}).err.find("--limit-voxels must be finite and > 0"),
@@ -132,11 +133,11 @@ TEST(ComputeCommandTest, HelpExitsZero) {
 
 TEST(ComputeCommandTest, UsageAndInputErrorsExitTwo) {
   const std::string good_mask = tmp("good.npy");
-  ASSERT_EQ(writeNpyMask(good_mask, std::vector<uint8_t>(64, 1), {4, 4, 4}), "");
+  ASSERT_TRUE(IsOk(writeNpyMask(good_mask, std::vector<uint8_t>(64, 1), {4, 4, 4})));
   const std::string text_file = tmp("text.npy");
   std::ofstream(text_file) << "not a numpy file\n";
   const std::string empty_mask = tmp("empty.npy");
-  ASSERT_EQ(writeNpyMask(empty_mask, std::vector<uint8_t>(64, 0), {4, 4, 4}), "");
+  ASSERT_TRUE(IsOk(writeNpyMask(empty_mask, std::vector<uint8_t>(64, 0), {4, 4, 4})));
   const std::string out = tmp("never.npy");
   const std::vector<std::string> pts = {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", out};
   auto with = [&](std::vector<std::string> extra, std::vector<std::string> base) {
@@ -289,7 +290,7 @@ TEST(ComputeCommandTest, InterruptKeepsEveryCompleteSegment) {
   EXPECT_LT(up_to, 130) << "the run should have been stopped well before its end";
   std::vector<float> v;
   Coord d;
-  ASSERT_EQ(readNpyFloat32(out, &v, &d), "");
+  ASSERT_TRUE(IsOk(readNpyFloat32(out, &v, &d)));
   int64_t kept = 0, wrong = 0;
   for (int z = 0; z < d.z; ++z)
     for (int y = 0; y < d.y; ++y)
@@ -328,13 +329,13 @@ TEST(ComputeCommandTest, SharesQuerysOutputsIncludingClosestFeatures) {
 
   std::vector<float> field;
   Coord d;
-  ASSERT_EQ(readNpyFloat32(out, &field, &d), "");
+  ASSERT_TRUE(IsOk(readNpyFloat32(out, &field, &d)));
   NpyArray id_array;
-  ASSERT_EQ(readNpy(ids, &id_array), "");
+  ASSERT_TRUE(IsOk(readNpy(ids, &id_array)));
   EXPECT_EQ(id_array.descr, "<i4");
   ASSERT_EQ(id_array.data.size(), field.size() * 4);
   TriangleMesh mesh;
-  ASSERT_EQ(loadMesh(mesh_path, &mesh, nullptr), "");
+  ASSERT_TRUE(IsOk(loadMesh(mesh_path, &mesh, nullptr)));
   // The grid as the command built it: origin from the metadata would do too; the npy's voxel (0,0,0) is the origin.
   const size_t o = json.find("\"origin\": [");
   ASSERT_NE(o, std::string::npos);

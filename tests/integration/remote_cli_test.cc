@@ -11,13 +11,14 @@
 #include <openvdb/openvdb.h>
 
 #include "client/cli.h"
-#include "core/dense_field.h"
-#include "core/engine.h"
+#include "core/io/dense_field.h"
+#include "core/band/band_engine.h"
 #include "core/io/npy.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
 #include "server/server.h"
+#include "tests/support/status_testing.h"
 #include "tests/support/run_command.h"
 
 namespace distband {
@@ -66,22 +67,22 @@ TEST(RemoteCliTest, QueryWritesALevelSetVdbThatMatchesTheEngine) {
 
   // In-process reference on the same grid.
   TriangleMesh mesh;
-  ASSERT_EQ(loadMesh(f.path("cube.obj"), &mesh, nullptr), "");
+  ASSERT_TRUE(IsOk(loadMesh(f.path("cube.obj"), &mesh, nullptr)));
   MeshGridOptions mo;
   mo.resolution = 40;
   mo.limit_world = limit;  // the default padding holds the limit
   Grid grid;
-  ASSERT_EQ(gridForMesh(mesh, mo, &grid), "");
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, mo, &grid)));
   MeshSeedOptions so;
   so.limit_voxels = limit / grid.voxelSize();
   Seeds seeds;
-  ASSERT_EQ(makeMeshSeeds(grid, mesh, so, &seeds), "");
-  EngineOptions eo;
+  ASSERT_TRUE(IsOk(makeMeshSeeds(grid, mesh, so, &seeds)));
+  BandOptions eo;
   eo.limit_world = limit;
   eo.segment_length_world = 0.1;
   DenseField ref(grid, float(limit));
   std::vector<uint8_t> delivered(size_t(grid.voxelCount()), 0);
-  computeDistanceField(grid, seeds, eo, [&](SegmentBricks&& s) {
+  computeBandField(grid, seeds, eo, [&](SegmentBricks&& s) {
     ref.add(s);
     for (const Brick& b : s.bricks)
       for (int i = 0; i < kBrickVoxels; ++i)
@@ -123,7 +124,7 @@ TEST(RemoteCliTest, QueryWritesALevelSetVdbThatMatchesTheEngine) {
 
   std::vector<float> npy;
   Coord dims;
-  ASSERT_EQ(readNpyFloat32(f.path("cube.npy"), &npy, &dims), "");
+  ASSERT_TRUE(IsOk(readNpyFloat32(f.path("cube.npy"), &npy, &dims)));
   ASSERT_EQ(dims, grid.dims());
   int64_t npy_mismatches = 0;
   for (size_t i = 0; i < npy.size(); ++i) npy_mismatches += delivered[i] && npy[i] != ref.values()[i];
@@ -192,8 +193,8 @@ TEST(RemoteCliTest, LimitInVoxelsGivesTheSameFieldAsTheWorldLimit) {
   EXPECT_NE(f.out.str().find("limit 1.5,"), std::string::npos) << f.out.str();
   std::vector<float> a, b;
   Coord d;
-  ASSERT_EQ(readNpyFloat32(f.path("world.npy"), &a, &d), "");
-  ASSERT_EQ(readNpyFloat32(f.path("voxels.npy"), &b, &d), "");
+  ASSERT_TRUE(IsOk(readNpyFloat32(f.path("world.npy"), &a, &d)));
+  ASSERT_TRUE(IsOk(readNpyFloat32(f.path("voxels.npy"), &b, &d)));
   EXPECT_EQ(a, b);
   EXPECT_EQ(run({"--limit", "1.5", "--limit-voxels", "3", "--out", f.path("both.npy")}), 2);
   // In voxels the isosurface is checked against the limit once the header gives the voxel size.

@@ -14,7 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "client/remote_client.h"
-#include "core/dense_field.h"
+#include "core/io/dense_field.h"
 #include "server/server.h"
 #include "tests/support/query_requests.h"
 

@@ -15,8 +15,8 @@
 #include <gtest/gtest.h>
 
 #include "client/remote_client.h"
-#include "core/dense_field.h"
-#include "core/engine.h"
+#include "core/io/dense_field.h"
+#include "core/band/band_engine.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
@@ -25,6 +25,7 @@
 #include "proto/brick_codec.h"
 #include "server/server.h"
 #include "tests/integration/service_fixture.h"
+#include "tests/support/status_testing.h"
 #include "tests/support/build_flavor.h"
 #include "tests/support/exact_edt.h"
 
@@ -32,10 +33,10 @@ namespace distband {
 namespace {
 
 
-DenseField reference(const Grid& grid, const Seeds& seeds, EngineOptions options, float background) {
+DenseField reference(const Grid& grid, const Seeds& seeds, BandOptions options, float background) {
   DenseField f(grid, background);
   options.threads = 1;
-  computeDistanceField(grid, seeds, options, [&](SegmentBricks&& s) { f.add(s); });
+  computeBandField(grid, seeds, options, [&](SegmentBricks&& s) { f.add(s); });
   return f;
 }
 
@@ -70,8 +71,8 @@ TEST(ServiceTest, PointQueryStreamsTheInProcessFieldBitForBit) {
 
   const Grid grid({0, 0, 0}, h, dims);
   Seeds seeds;
-  ASSERT_EQ(makePointSeeds(grid, pts, &seeds), "");
-  EngineOptions o;
+  ASSERT_TRUE(IsOk(makePointSeeds(grid, pts, &seeds)));
+  BandOptions o;
   o.segment_length_world = segment;
   o.limit_world = limit;
   const DenseField ref = reference(grid, seeds, o, float(limit));
@@ -93,8 +94,8 @@ TEST(ServiceTest, Float16EncodingRoundsEachValue) {
   EXPECT_EQ(s.result.header.encoding(), v1::BRICK_ENCODING_FLOAT16);
   const Grid grid({0, 0, 0}, 1.0, dims);
   Seeds seeds;
-  ASSERT_EQ(makePointSeeds(grid, pts, &seeds), "");
-  DenseField ref = reference(grid, seeds, EngineOptions{}, std::numeric_limits<float>::infinity());
+  ASSERT_TRUE(IsOk(makePointSeeds(grid, pts, &seeds)));
+  DenseField ref = reference(grid, seeds, BandOptions{}, std::numeric_limits<float>::infinity());
   for (float& v : ref.values()) v = halfToFloat(floatToHalf(v));
   expectBitIdentical(*s.field, ref);
 }
@@ -115,8 +116,8 @@ TEST(ServiceTest, FewPointsWithoutLimitAreTheSeparablePointEdtBitForBit) {
   EXPECT_GT(s.done.size(), 3u);
   const Grid grid({0, 0, 0}, h, dims);
   Seeds seeds;
-  ASSERT_EQ(makePointSeeds(grid, pts, &seeds), "");
-  EngineOptions o;
+  ASSERT_TRUE(IsOk(makePointSeeds(grid, pts, &seeds)));
+  BandOptions o;
   o.segment_length_world = 3.0;
   expectBitIdentical(*s.field, reference(grid, seeds, o, NAN));
   ASSERT_EQ(s.closest.size(), size_t(grid.voxelCount()));
@@ -163,8 +164,8 @@ TEST(ServiceTest, VolumeUploadAndSignedQueryMatchInProcess) {
 
   const Grid grid({0, 0, 0}, 0.25, dims);
   Seeds seeds;
-  ASSERT_EQ(makeVolumeSeeds(grid, mask, true, &seeds), "");
-  EngineOptions o;
+  ASSERT_TRUE(IsOk(makeVolumeSeeds(grid, mask, true, &seeds)));
+  BandOptions o;
   o.segment_length_world = 0.5;
   o.limit_world = 3.0;
   expectBitIdentical(*s.field, reference(grid, seeds, o, 3.0f));
@@ -249,21 +250,21 @@ TEST(ServiceTest, MeshUploadInChunksAndQueryMatchInProcess) {
   const std::string path = (std::filesystem::temp_directory_path() / "distband_service_test_cube.obj").string();
   std::ofstream(path) << obj;
   TriangleMesh mesh;
-  ASSERT_EQ(loadMesh(path, &mesh, nullptr), "");
+  ASSERT_TRUE(IsOk(loadMesh(path, &mesh, nullptr)));
   std::filesystem::remove(path);
   MeshGridOptions mo;
   mo.resolution = 40;
   mo.padding_voxels = 4;
   Grid grid;
-  ASSERT_EQ(gridForMesh(mesh, mo, &grid), "");
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, mo, &grid)));
   EXPECT_EQ(s.result.grid.dims(), grid.dims());
   EXPECT_EQ(s.result.grid.origin(), grid.origin());
   EXPECT_EQ(s.result.grid.voxelSize(), grid.voxelSize());
   MeshSeedOptions so;
   so.limit_voxels = 0.35 / grid.voxelSize();
   Seeds seeds;
-  ASSERT_EQ(makeMeshSeeds(grid, mesh, so, &seeds), "");
-  EngineOptions o;
+  ASSERT_TRUE(IsOk(makeMeshSeeds(grid, mesh, so, &seeds)));
+  BandOptions o;
   o.segment_length_world = 0.1;
   o.limit_world = 0.35;
   expectBitIdentical(*s.field, reference(grid, seeds, o, 0.35f));
@@ -512,8 +513,8 @@ TEST(ServiceTest, UploadLimitsAreEnforced) {
 bool fieldEquals(const DenseField& got, const std::vector<Vec3d>& pts, const Grid& grid, double segment,
                  double limit) {
   Seeds seeds;
-  if (!makePointSeeds(grid, pts, &seeds).empty()) return false;
-  EngineOptions o;
+  if (!makePointSeeds(grid, pts, &seeds).ok()) return false;
+  BandOptions o;
   o.segment_length_world = segment;
   o.limit_world = limit == 0 ? std::numeric_limits<double>::infinity() : limit;
   const DenseField ref = reference(grid, seeds, o, float(limit));

@@ -5,8 +5,8 @@
 
 namespace distband {
 
-CollectedField collectSegments(const Grid& grid, const EngineOptions& o,
-                               const std::function<EngineResult(const SegmentCallback&)>& compute) {
+CollectedField collectSegments(const Grid& grid, const BandOptions& o,
+                               const std::function<FieldRunResult(const SegmentCallback&)>& compute) {
   CollectedField c;
   c.values.assign(size_t(grid.voxelCount()), NAN);
   c.closest.assign(size_t(grid.voxelCount()), -1);

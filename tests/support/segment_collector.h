@@ -1,5 +1,5 @@
 // Test support: runs a field computation and collects what it streams, checking the streaming contract of
-// core/engine.h on the way — segments in order, each brick non-empty and sorted by origin (z, y, x), chunks no larger
+// core/band/band_engine.h on the way — segments in order, each brick non-empty and sorted by origin (z, y, x), chunks no larger
 // than options.max_chunk_bricks, every delivered voxel inside its segment's range, a last segment unless interrupted.
 // Contract: `compute` runs the computation with the callback it is given (e.g. a lambda calling
 // computeSeparableVolumeField). Per grid voxel (Grid::denseIndex): the value last delivered (NaN if none), its
@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "core/engine.h"
+#include "core/band/band_engine.h"
 #include "core/grid.h"
 
 namespace distband {
@@ -22,10 +22,10 @@ struct CollectedField {
   std::vector<int64_t> closest;
   std::vector<int> times_delivered;
   std::string order_error;
-  EngineResult result;
+  FieldRunResult result;
 };
 
-CollectedField collectSegments(const Grid& grid, const EngineOptions& options,
-                               const std::function<EngineResult(const SegmentCallback&)>& compute);
+CollectedField collectSegments(const Grid& grid, const BandOptions& options,
+                               const std::function<FieldRunResult(const SegmentCallback&)>& compute);
 
 }  // namespace distband

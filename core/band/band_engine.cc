@@ -1,0 +1,84 @@
+// The band engine's public entry points (band_engine.h has the contract, docs/algorithm.md the method): option checks
+// and defaults, and computeBandField, which runs a band_internal::BandRun in the requested TBB arena. The engine's
+// parts live in core/band/internal/: band_key.h (the per-voxel key), brick_table (sparse brick storage), link_table
+// (the stencil's links), propagation, second_ring, emission, band_run (the segment loop).
+#include "core/band/band_engine.h"
+
+#include <chrono>
+#include <cmath>
+#include <optional>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+#include "core/band/internal/band_run.h"
+#include "core/thread_arena.h"
+
+namespace distband {
+
+std::string_view modeName(PropagationMode mode) { return mode == PropagationMode::kPaper ? "paper" : "exact"; }
+
+bool parseMode(std::string_view name, PropagationMode* mode) {
+  if (name == "paper") *mode = PropagationMode::kPaper;
+  else if (name == "exact") *mode = PropagationMode::kExact;
+  else return false;
+  return true;
+}
+
+StencilKind defaultStencil(SiteKind kind) {
+  return kind == SiteKind::kTriangle ? StencilKind::kFcc12 : StencilKind::kCubic26;
+}
+
+int defaultLifespanMargin(StencilKind stencil) {
+  // The paper's t_min/t_max bounds hold for arrival times counted from the site; our clock starts at the initial
+  // band, up to ~1 voxel (1–2 steps) off the site. See docs/algorithm.md and the lifespan tests.
+  switch (stencil) {
+    case StencilKind::kCubic6: return 3;
+    case StencilKind::kCubic18: return 2;
+    case StencilKind::kCubic26: return 2;
+    case StencilKind::kFcc12: return 2;
+  }
+  return 2;
+}
+
+Status validateBandOptions(const Grid& grid, const BandOptions& o) {
+  if (Status s = validateRunOptions(grid, o); !s.ok()) return s;
+  if (std::isnan(o.lifespan_alpha)) return Status::InvalidArgument("lifespan_alpha must not be NaN");
+  if (o.lifespan_margin > 1000) return Status::InvalidArgument("lifespan_margin must be <= 1000");
+  return Status::Ok();
+}
+
+namespace {
+
+FieldRunResult runEngine(const Grid& grid, const Seeds& seeds, const BandOptions& options,
+                       const SegmentCallback& on_segment, std::vector<BandVoxel>* owned_band) {
+  if (Status s = validateBandOptions(grid, options); !s.ok()) throw std::invalid_argument(s.message());
+  if (seeds.region && seeds.region->size() != size_t(grid.voxelCount()))
+    throw std::invalid_argument("seeds.region must hold one label per grid voxel");
+  FieldRunResult result;
+  auto body = [&] {
+    std::optional<band_internal::BandRun> run;
+    run.emplace(grid, seeds, options, on_segment, owned_band);
+    result = run->run();
+    const auto t0 = std::chrono::steady_clock::now();
+    run.reset();
+    result.release_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+  runWithThreads(options.threads, body);
+  return result;
+}
+
+}  // namespace
+
+FieldRunResult computeBandField(const Grid& grid, const Seeds& seeds, const BandOptions& options,
+                                  const SegmentCallback& on_segment) {
+  return runEngine(grid, seeds, options, on_segment, nullptr);
+}
+
+FieldRunResult computeBandField(const Grid& grid, Seeds&& seeds, const BandOptions& options,
+                                  const SegmentCallback& on_segment) {
+  Seeds owned = std::move(seeds);
+  return runEngine(grid, owned, options, on_segment, &owned.band);
+}
+
+}  // namespace distband

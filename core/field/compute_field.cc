@@ -1,0 +1,60 @@
+#include "core/field/compute_field.h"
+
+#include <stdexcept>
+#include <utility>
+
+#include "core/band/band_engine.h"
+#include "core/seeds/mesh_seeds.h"
+#include "core/seeds/point_seeds.h"
+#include "core/seeds/volume_seeds.h"
+#include "core/separable/point_edt.h"
+#include "core/separable/volume_edt.h"
+
+namespace distband {
+
+Status buildFieldInputs(const FieldPlan& plan, const Grid& grid, const VoxelBox* window, const SeedSource& source,
+                        const Interrupter* interrupter, FieldInputs* out) {
+  const Grid run_grid = window ? grid.window(*window) : grid;
+  FieldInputs in;
+  switch (plan.seeds) {
+    case SeedKind::kPoints:
+      if (!source.points) throw std::invalid_argument("buildFieldInputs: point seeds need their points");
+      if (Status s = makePointSeeds(grid, *source.points, &in.seeds, window); !s.ok()) return s;
+      break;
+    case SeedKind::kVolume:
+      if (!source.mask) throw std::invalid_argument("buildFieldInputs: a seed volume needs its mask");
+      if (plan.algorithm == FieldAlgorithm::kSeparable) {  // the separable EDT reads the mask itself
+        if (Status s = checkSeedMask(*source.mask, plan.inside_negative); !s.ok()) return s;
+        in.mask = source.mask;
+      } else if (Status s = makeVolumeSeeds(run_grid, *source.mask, plan.inside_negative, &in.seeds, interrupter);
+                 !s.ok()) {
+        return s;
+      }
+      break;
+    case SeedKind::kMesh: {
+      if (!source.mesh) throw std::invalid_argument("buildFieldInputs: mesh seeds need the mesh");
+      MeshSeedOptions o = plan.meshSeedOptions(run_grid);
+      o.interrupter = interrupter;
+      if (Status s = makeMeshSeeds(run_grid, *source.mesh, o, &in.seeds); !s.ok()) return s;
+      break;
+    }
+  }
+  *out = std::move(in);
+  return Status::Ok();
+}
+
+FieldRunResult computeField(const FieldPlan& plan, const Grid& grid, FieldInputs inputs, const FieldRunOptions& run,
+                            const SegmentCallback& on_segment) {
+  if (plan.algorithm == FieldAlgorithm::kSeparable) {
+    switch (plan.seeds) {
+      case SeedKind::kVolume:
+        if (!inputs.mask) throw std::invalid_argument("computeField: a separable volume plan needs the seed volume");
+        return computeSeparableVolumeField(grid, *inputs.mask, plan.inside_negative, run, on_segment);
+      case SeedKind::kPoints: return computeSeparablePointField(grid, inputs.seeds, run, on_segment);
+      case SeedKind::kMesh: throw std::invalid_argument("computeField: meshes have no separable plan");
+    }
+  }
+  return computeBandField(grid, std::move(inputs.seeds), plan.bandOptions(run), on_segment);
+}
+
+}  // namespace distband

@@ -1,0 +1,110 @@
+#include "core/field/field_plan.h"
+
+#include <cmath>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+namespace distband {
+
+std::string_view algorithmName(FieldAlgorithm algorithm) {
+  return algorithm == FieldAlgorithm::kSeparable ? "separable" : "band";
+}
+
+std::string_view FieldPlan::signName() const {
+  if (seeds == SeedKind::kMesh) return signMethodName(mesh_sign);
+  return seeds == SeedKind::kVolume && inside_negative ? "mask-inside" : "unsigned";
+}
+
+std::string_view FieldPlan::closestFeatureName() const {
+  switch (seeds) {
+    case SeedKind::kMesh: return "triangle";
+    case SeedKind::kVolume: return "voxel";
+    default: return "point";
+  }
+}
+
+std::string algorithmDescription(FieldAlgorithm algorithm, SeedKind seeds, bool limited) {
+  if (algorithm == FieldAlgorithm::kBand)
+    return "band: the adaptive iteration on an evolving active band (SMI 2009); segments stream nearest first as "
+           "the band passes them";
+  if (seeds == SeedKind::kPoints)
+    return "separable: an exact point EDT over the whole grid, axis by axis (points on few lattice planes); the first "
+           "segment comes once the whole field is known";
+  if (limited)
+    return "separable: an exact EDT, axis by axis, over the bricks within the limit of the seed volume's boundary; "
+           "the first segment comes once those bricks are known";
+  return "separable: an exact EDT over the whole grid, axis by axis; the first segment comes once the whole field is "
+         "known";
+}
+
+FieldRunOptions FieldPlan::runOptions() const {
+  FieldRunOptions o;
+  o.limit_world = limit_world;
+  o.segment_length_world = segment_length_world;
+  o.closest_features = closest_features;
+  return o;
+}
+
+BandOptions FieldPlan::bandOptions(const FieldRunOptions& run) const {
+  BandOptions o;
+  static_cast<FieldRunOptions&>(o) = run;
+  o.mode = mode;
+  o.stencil = stencil;
+  o.second_ring = second_ring;
+  return o;
+}
+
+MeshSeedOptions FieldPlan::meshSeedOptions(const Grid& grid) const {
+  MeshSeedOptions o;
+  o.mode = mode == PropagationMode::kPaper ? MeshSiteMode::kPaper : MeshSiteMode::kExactFeature;
+  o.sign = mesh_sign;
+  o.limit_voxels = limitVoxels(grid);
+  return o;
+}
+
+Status planField(const FieldRequest& r, const Grid& grid, const MeshReport* mesh_report, FieldPlan* out) {
+  FieldPlan p;
+  p.seeds = r.seeds;
+  p.mode = r.mode.value_or(PropagationMode::kExact);
+  // Meshes in exact mode propagate triangle sites; paper mode and the other seeds propagate points.
+  p.sites = r.seeds == SeedKind::kMesh && p.mode == PropagationMode::kExact ? SiteKind::kTriangle : SiteKind::kPoint;
+  p.stencil = r.stencil.value_or(defaultStencil(p.sites));
+  switch (r.seeds) {
+    case SeedKind::kPoints:
+      if (r.inside_negative) return Status::InvalidArgument("sign: point seeds are unsigned");
+      p.sign_reason = "points are unsigned";
+      break;
+    case SeedKind::kVolume:
+      p.inside_negative = r.inside_negative;
+      p.sign_reason = r.inside_negative ? "requested" : "default";
+      break;
+    case SeedKind::kMesh:
+      if (r.inside_negative) return Status::InvalidArgument("sign: mask-inside is for volume seeds");
+      if (!mesh_report) throw std::invalid_argument("planField: a mesh's sign needs its report");
+      p.mesh_sign = resolveSignMethod(r.mesh_sign.value_or(kDefaultMeshSign), *mesh_report, &p.sign_reason);
+      break;
+  }
+  if (r.seeds != SeedKind::kMesh && r.mesh_sign && *r.mesh_sign != SignMethod::kUnsigned &&
+      *r.mesh_sign != SignMethod::kAuto)
+    return Status::InvalidArgument(fmt::format("sign: {} is for meshes", signMethodName(*r.mesh_sign)));
+  p.limit_world = r.limit_voxels > 0 ? r.limit_voxels * grid.voxelSize() : r.limit_world;
+  p.segment_length_world = r.segment_length_world;
+  p.closest_features = r.closest_features;
+  p.second_ring = r.second_ring;
+  p.point_layout = r.point_layout;
+  // A volume's exact field is what a separable EDT computes fastest, over the whole grid or, with a limit, over the
+  // bricks within it (docs/benchmarks.md, edt_peer_bench); a stencil, a second ring or paper mode asks for the
+  // propagation itself, and a volume's closest features come from the propagation's sites. Point seeds on few lattice
+  // planes take the separable point EDT over the whole grid; with a limit the band's work follows the limit instead.
+  const bool propagation_asked = p.mode != PropagationMode::kExact || r.stencil || r.second_ring;
+  if (r.seeds == SeedKind::kVolume && !propagation_asked && !r.closest_features)
+    p.algorithm = FieldAlgorithm::kSeparable;
+  if (r.seeds == SeedKind::kPoints && !propagation_asked && std::isinf(p.limit_world) && r.point_layout &&
+      separablePointsPay(grid.dims(), *r.point_layout))
+    p.algorithm = FieldAlgorithm::kSeparable;
+  *out = std::move(p);
+  return Status::Ok();
+}
+
+}  // namespace distband

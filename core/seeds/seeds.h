@@ -1,0 +1,62 @@
+// Seeds: what the engine propagates from — the initial band and the table of sites it refers to.
+// Contract: a seed source (points, volume, mesh: see core/seeds/) builds a Seeds for one Grid. The engine reads
+// it without modifying it, from many threads at once.
+//   * A *site* is a closest-feature candidate. kPoint sites are positions (index space, voxel units); kTriangle
+//     sites are triangles (index space) and a voxel's distance to one is the exact point–triangle distance.
+//   * `band` lists the voxels the propagation starts from, each with its site; the engine computes their
+//     distances from the site itself. kNoSite marks a voxel whose distance is 0 and that offers nothing to its
+//     neighbours (the interior of a seed volume). With `band_exact` the band's sites are final.
+//   * `region` (optional, dense x-fastest, one byte per voxel): propagation never crosses between voxels of
+//     different labels (used for signed seed volumes, where inside and outside have different site sets).
+//   * `site_offset`: sites are in the index space of a larger grid of which the engine's grid is the window at
+//     site_offset (a tile of a query split over servers); voxel c is at c + site_offset there. Zero otherwise.
+//   * Closest features (BandOptions::closest_features): kSiteIndex reports site_feature[site], or the site index
+//     itself when site_feature is empty (triangle ids, point indices); kSiteVoxel reports the voxel a point site
+//     sits on as its linear index in the engine's grid (Grid::denseIndex; volumes, whose sites are boundary
+//     voxels), kNoSite voxels (the seed volume's inside) being their own feature.
+//   * `sign` (optional): called on every delivered brick to turn unsigned distances into signed ones
+//     (negative inside, OpenVDB's convention); it receives each masked voxel's site.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "core/brick.h"
+#include "core/grid.h"
+#include "core/types.h"
+
+namespace distband {
+
+inline constexpr uint32_t kNoSite = std::numeric_limits<uint32_t>::max() - 1;
+
+enum class SiteKind { kPoint, kTriangle };
+
+struct BandVoxel {
+  Coord voxel;
+  uint32_t site = kNoSite;
+};
+
+struct Seeds {
+  SiteKind kind = SiteKind::kPoint;
+  std::vector<Vec3d> points;                    ///< kPoint sites, index space
+  std::vector<std::array<Vec3d, 3>> triangles;  ///< kTriangle sites, index space
+  std::vector<BandVoxel> band;
+  /// True when every band voxel's site is already its closest site (mesh and volume seeds): the engine then
+  /// never offers anything to band voxels, which saves most of the work of thin bands.
+  bool band_exact = false;
+  std::shared_ptr<const std::vector<uint8_t>> region;  ///< null, or grid.voxelCount() labels
+  Coord site_offset{};  ///< where the engine's grid sits in the sites' index space (see above)
+  enum class FeatureKind { kSiteIndex, kSiteVoxel };
+  FeatureKind feature_kind = FeatureKind::kSiteIndex;
+  std::vector<uint32_t> site_feature;  ///< kSiteIndex: the feature of each site (empty: the site index)
+  /// Signs the masked values of `brick` in place; `sites[i]` is the site of voxel offset i (kNoSite if none).
+  std::function<void(Brick& brick, const uint32_t* sites)> sign;
+
+  size_t siteCount() const { return kind == SiteKind::kPoint ? points.size() : triangles.size(); }
+};
+
+}  // namespace distband

@@ -1,0 +1,155 @@
+// Segment emission of the separable EDTs (core/separable/volume_edt.cc, point_edt.cc): a field that is already
+// computed, streamed under the run contract.
+// Contract of emitSegments(grid, options, source, result, on_segment): streams a field that is already computed,
+// under the run contract (core/field/field_run.h) — segments of options.segment_length_world nearest first, each
+// voxel delivered once in the segment its |distance| falls in, bricks in (z, y, x) order, chunks of
+// options.max_chunk_bricks with the last one marked complete, the final segment marked last; per-segment stats are
+// appended to `result`. `Source` lists the bricks in (z, y, x) order:
+//   size_t count(); Coord origin(i); bool value(i, offset, voxel, double* d) — true when the voxel is delivered, with
+//   its signed distance d in voxels (called from many threads, twice per voxel: once to sort bricks into segments,
+//   once to fill them); optionally `static constexpr bool kHasFeatures = true` and int64_t feature(i, offset, voxel),
+//   the voxel's closest feature (Brick::closest, with options.closest_features; asking a source without features
+//   throws std::invalid_argument). Returns false when options.interrupter stopped it (polled per 64 bricks while
+//   sorting, per 16 while filling, and per chunk).
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <iterator>
+#include <limits>
+#include <stdexcept>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "core/brick.h"
+#include "core/field/field_run.h"
+#include "core/first_touch.h"
+#include "core/grid.h"
+#include "core/interrupter.h"
+
+namespace distband::separable_internal {
+
+template <typename Source, typename = void>
+struct SourceHasFeatures : std::false_type {};
+template <typename Source>
+struct SourceHasFeatures<Source, std::enable_if_t<Source::kHasFeatures>> : std::true_type {};
+
+/// The brick list of a whole-grid source: every brick of the grid, in (z, y, x) order.
+struct WholeGridBricks {
+  const Grid& grid;
+  size_t count() const { return size_t(grid.brickCount()); }
+  Coord origin(size_t b) const { return grid.brickOrigin(int64_t(b)); }
+};
+
+/// Streams `source` (see the contract above). False when interrupted.
+template <typename Source>
+bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source& source, FieldRunResult* result,
+                  const SegmentCallback& on_segment) {
+  using Clock = std::chrono::steady_clock;
+  const Interrupter* interrupter = options.interrupter;
+  const double h = grid.voxelSize();
+  const bool closest = options.closest_features;
+  if (closest && !SourceHasFeatures<Source>::value)
+    throw std::invalid_argument("closest features: this algorithm does not track them (use the band)");
+  // |distance| in voxels, and its segment: (i L, (i + 1) L], segment 0 including 0 (one segment when L = 0).
+  const double length = options.segment_length_world > 0 ? options.segment_length_world / h : 0;
+  auto segmentOf = [&](double d) { return length > 0 && d > length ? int(std::ceil(d / length)) - 1 : 0; };
+  constexpr int kNone = std::numeric_limits<int>::max();
+  // Each brick's segment range (kNone: nothing delivered), then the bricks of every segment in (z, y, x) order.
+  const size_t bricks = source.count();
+  std::vector<int> first(bricks), last(bricks);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, bricks, 64), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t b = r.begin(); b != r.end(); ++b) {
+      if ((b & 63) == 0 && isInterrupted(interrupter)) return;
+      const Coord origin = source.origin(b);
+      int lo = kNone, hi = -1;
+      for (int off = 0; off < kBrickVoxels; ++off) {
+        double d;
+        if (!source.value(b, off, origin + brickLocal(off), &d)) continue;
+        const int s = segmentOf(std::abs(d));
+        lo = std::min(lo, s);
+        hi = std::max(hi, s);
+        if (length == 0) break;  // one segment: a voxel is enough
+      }
+      first[b] = lo;
+      last[b] = hi;
+    }
+  });
+  if (isInterrupted(interrupter)) return false;
+  int segments = 1;
+  for (int hi : last) segments = std::max(segments, hi + 1);
+  std::vector<std::vector<uint32_t>> by_segment(static_cast<size_t>(segments));
+  for (size_t b = 0; b < bricks; ++b)
+    for (int s = first[b]; s <= last[b]; ++s) by_segment[size_t(s)].push_back(uint32_t(b));
+  std::vector<int>().swap(first);
+  std::vector<int>().swap(last);
+
+  // Without chunking a segment is built in one piece, where it is delivered: no second copy of its bricks.
+  const size_t per_chunk =
+      options.max_chunk_bricks ? std::min<size_t>(options.max_chunk_bricks, 8192) : std::numeric_limits<size_t>::max();
+  for (int s = 0; s < segments; ++s) {
+    const auto ts = Clock::now();
+    SegmentStats stats;
+    stats.index = s;
+    stats.lower_world = length > 0 ? s * length * h : 0;
+    stats.upper_world = std::min(length > 0 ? (s + 1) * length * h : std::numeric_limits<double>::infinity(),
+                                 options.limit_world);
+    const std::vector<uint32_t>& list = by_segment[size_t(s)];
+    for (size_t c0 = 0; c0 < list.size() || c0 == 0;) {
+      if (isInterrupted(interrupter)) return false;
+      const size_t c1 = list.size() - c0 <= per_chunk ? list.size() : c0 + per_chunk;
+      std::vector<Brick> part;
+      appendUnsetBricks(part, c1 - c0);
+      tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 16), [&](const tbb::blocked_range<size_t>& r) {
+        if (isInterrupted(interrupter)) return;
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+          const size_t b = list[i];
+          Brick& brick = part[i - c0];
+          brick.origin = source.origin(b);
+          if (closest) brick.closest.assign(kBrickVoxels, -1);
+          for (int off = 0; off < kBrickVoxels; ++off) {
+            double d;
+            const Coord c = brick.origin + brickLocal(off);
+            if (!source.value(b, off, c, &d) || segmentOf(std::abs(d)) != s) {
+              brick.values[off] = 0;  // the bricks were made without values (appendUnsetBricks)
+              continue;
+            }
+            brick.values[off] = float(d * h);
+            brick.mask.set(off);
+            if constexpr (SourceHasFeatures<Source>::value)
+              if (closest) brick.closest[off] = source.feature(b, off, c);
+          }
+        }
+      });
+      if (isInterrupted(interrupter)) return false;
+      // A brick spanning segments s-1..s+1 may hold none of segment s: only bricks with voxels are delivered.
+      part.erase(std::remove_if(part.begin(), part.end(), [](const Brick& b) { return b.mask.empty(); }), part.end());
+      for (const Brick& b : part) stats.voxels += b.mask.count();
+      stats.bricks += int64_t(part.size());
+      const bool done = c1 >= list.size();
+      SegmentBricks p;
+      p.index = s;
+      p.lower_world = stats.lower_world;
+      p.upper_world = stats.upper_world;
+      p.complete = done;
+      p.last = done && s + 1 == segments;
+      p.bricks = std::move(part);
+      if (on_segment) on_segment(std::move(p));
+      if (done) break;
+      c0 = c1;
+    }
+    std::vector<uint32_t>().swap(by_segment[size_t(s)]);
+    stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
+    result->voxels += stats.voxels;
+    result->segments.push_back(stats);
+  }
+  return true;
+}
+
+}  // namespace distband::separable_internal

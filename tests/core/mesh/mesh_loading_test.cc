@@ -1,0 +1,233 @@
+// Tests for core/mesh/triangle_mesh (loading and validation) and core/mesh/mesh_grid.
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "core/mesh/mesh_grid.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/status.h"
+#include "tests/support/status_testing.h"
+
+namespace distband {
+namespace {
+
+namespace fs = std::filesystem;
+
+class MeshLoadingTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("distband_mesh_loading_" + std::to_string(::getpid()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string write(const std::string& name, const std::string& bytes) {
+    const std::string path = (dir_ / name).string();
+    std::ofstream(path, std::ios::binary) << bytes;
+    return path;
+  }
+  // Loading must fail with `code` and a message naming the file and containing `what`.
+  void expectError(const std::string& path, const std::string& what,
+                   Status::Code code = Status::Code::kInvalidArgument) {
+    TriangleMesh mesh;
+    MeshReport report;
+    const Status s = loadMesh(path, &mesh, &report);
+    EXPECT_TRUE(IsError(s, code, path));
+    EXPECT_TRUE(IsError(s, code, what));
+    EXPECT_TRUE(mesh.triangles.empty());
+  }
+  fs::path dir_;
+};
+
+// A unit tetrahedron, outward, in each supported format.
+const char* kTetObj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+const char* kTetOff = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+const char* kTetPly =
+    "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+    "element face 4\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+    "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+
+std::string tetStlAscii() {
+  const double v[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const int f[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  std::string s = "solid tet\n";
+  for (const auto& t : f) {
+    s += "facet normal 0 0 0\nouter loop\n";
+    for (int k : t) s += "vertex " + std::to_string(v[k][0]) + " " + std::to_string(v[k][1]) + " " +
+                         std::to_string(v[k][2]) + "\n";
+    s += "endloop\nendfacet\n";
+  }
+  return s + "endsolid tet\n";
+}
+
+std::string tetStlBinary(uint32_t declared = 4, int written = 4) {
+  const float v[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const int f[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  std::string s(80, ' ');
+  s.append(reinterpret_cast<const char*>(&declared), 4);
+  for (int t = 0; t < written; ++t) {
+    const float n[3] = {0, 0, 0};
+    s.append(reinterpret_cast<const char*>(n), 12);
+    for (int k : f[t]) s.append(reinterpret_cast<const char*>(v[k]), 12);
+    s.append(2, '\0');
+  }
+  return s;
+}
+
+TEST_F(MeshLoadingTest, EveryFormatLoadsTheSameClosedTetrahedron) {
+  const std::string paths[] = {write("tet.obj", kTetObj), write("tet.off", kTetOff), write("tet.ply", kTetPly),
+                               write("tet_ascii.stl", tetStlAscii()), write("tet_binary.stl", tetStlBinary())};
+  for (const std::string& path : paths) {
+    TriangleMesh mesh;
+    MeshReport report;
+    ASSERT_TRUE(IsOk(loadMesh(path, &mesh, &report))) << path;
+    EXPECT_EQ(report.vertices, 4) << path;  // STL repeats corners per facet: welded back to 4
+    EXPECT_EQ(report.triangles, 4) << path;
+    EXPECT_EQ(report.boundary_edges, 0) << path;
+    EXPECT_EQ(report.non_manifold_edges, 0) << path;
+    EXPECT_TRUE(report.closed()) << path;
+    EXPECT_EQ(report.bbox_min, (Vec3d{0, 0, 0})) << path;
+    EXPECT_EQ(report.bbox_max, (Vec3d{1, 1, 1})) << path;
+    // Orientation is preserved: the signed volume of an outward tetrahedron is +1/6.
+    double volume = 0;
+    for (const auto& t : mesh.triangles)
+      volume += mesh.vertices[t[0]].dot(mesh.vertices[t[1]].cross(mesh.vertices[t[2]])) / 6.0;
+    EXPECT_NEAR(volume, 1.0 / 6.0, 1e-6) << path;
+  }
+}
+
+TEST_F(MeshLoadingTest, BundledMeshesReportTheirTopology) {
+  TriangleMesh bunny, teapot, fandisk;
+  MeshReport rb, rt, rf;
+  ASSERT_TRUE(IsOk(loadMesh(DISTBAND_TEST_DATA_DIR "/meshes/bunny.obj", &bunny, &rb)));
+  EXPECT_EQ(rb.triangles, 3674);
+  EXPECT_TRUE(rb.closed()) << rb.summary();
+  ASSERT_TRUE(IsOk(loadMesh(DISTBAND_TEST_DATA_DIR "/meshes/teapot.obj", &teapot, &rt)));
+  EXPECT_EQ(rt.triangles, 992);
+  EXPECT_GT(rt.boundary_edges, 0) << rt.summary();  // the teapot is open
+  ASSERT_TRUE(IsOk(loadMesh(DISTBAND_TEST_DATA_DIR "/meshes/fandisk.off", &fandisk, &rf)));
+  EXPECT_EQ(rf.triangles, 12946);
+  EXPECT_TRUE(rf.closed()) << rf.summary();
+}
+
+TEST_F(MeshLoadingTest, DegenerateTrianglesAreCountedAndSkipped) {
+  // A repeated corner and a collinear (zero-area) triangle besides the tetrahedron.
+  const std::string path = write("degenerate.obj", std::string(kTetObj) + "v 2 0 0\nf 1 1 2\nf 1 2 5\n");
+  TriangleMesh mesh;
+  MeshReport report;
+  ASSERT_TRUE(IsOk(loadMesh(path, &mesh, &report)));
+  EXPECT_EQ(report.triangles, 4);
+  EXPECT_EQ(report.degenerate, 2);
+  EXPECT_EQ(report.vertices, 4);  // the unreferenced vertex is dropped
+  EXPECT_NE(report.summary().find("2 degenerate"), std::string::npos) << report.summary();
+}
+
+TEST_F(MeshLoadingTest, OpenAndNonManifoldEdgesAreCounted) {
+  // Three triangles on one edge (non-manifold), everything else boundary.
+  const std::string path = write("fan.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 2 5\n");
+  TriangleMesh mesh;
+  MeshReport report;
+  ASSERT_TRUE(IsOk(loadMesh(path, &mesh, &report)));
+  EXPECT_EQ(report.non_manifold_edges, 1);
+  EXPECT_EQ(report.boundary_edges, 6);
+  EXPECT_FALSE(report.closed());
+}
+
+TEST_F(MeshLoadingTest, TruncatedFilesAreClearErrors) {
+  expectError(write("short.stl", tetStlBinary(4, 2)), "truncated or not STL");
+  expectError(write("short.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n"), "bytes follow");
+  // An OBJ cut in the middle of a face line leaves a 2-index face.
+  expectError(write("short.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2"), "at least 3 corners");
+  // A PLY whose body ends before its declared faces.
+  expectError(write("short.ply", std::string(kTetPly).substr(0, std::strlen(kTetPly) - 40)), "PLY element");
+}
+
+TEST_F(MeshLoadingTest, NonFiniteCoordinatesAreClearErrors) {
+  expectError(write("nan.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv nan 0 1\nf 1 2 3\nf 1 2 4\n"), "finite");
+  expectError(write("inf.off", "OFF\n3 1 0\n0 0 0\n1e999 0 0\n0 1 0\n3 0 1 2\n"), "finite");
+}
+
+TEST_F(MeshLoadingTest, OutOfRangeIndicesAreClearErrors) {
+  expectError(write("oor.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n"), "out of range");
+  expectError(write("oor.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n"), "refers to vertex 5");
+  std::string ply = kTetPly;
+  ply.replace(ply.rfind("3 1 2 3"), 7, "3 1 2 9");
+  expectError(write("oor.ply", ply), "out of range");
+}
+
+TEST_F(MeshLoadingTest, EmptyMissingAndUnsupportedFilesAreClearErrors) {
+  expectError(write("empty.obj", ""), "empty");
+  expectError(write("comments.obj", "# nothing here\n"), "no triangles");
+  expectError(write("points.obj", "v 0 0 0\nv 1 0 0\n"), "no triangles");
+  expectError((dir_ / "missing.obj").string(), "no such file", Status::Code::kNotFound);
+  expectError(write("mesh.xyz", kTetObj), "unsupported mesh format");
+  expectError(write("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n"), "degenerate");
+}
+
+TEST(ValidateMeshTest, RejectsBadInMemoryMeshes) {
+  TriangleMesh empty;
+  EXPECT_TRUE(IsError(validateMesh(&empty, nullptr), Status::Code::kInvalidArgument, "no triangles"));
+  TriangleMesh oor{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {{0, 1, 3}}};
+  EXPECT_TRUE(IsError(validateMesh(&oor, nullptr), Status::Code::kInvalidArgument, "vertex 3"));
+  TriangleMesh nan{{{0, 0, 0}, {NAN, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}};
+  EXPECT_TRUE(IsError(validateMesh(&nan, nullptr), Status::Code::kInvalidArgument, "non-finite"));
+}
+
+TEST(MeshGridTest, ResolutionSpansTheLongestSideIncludingPadding) {
+  TriangleMesh mesh{{{0, 0, 0}, {10, 0, 0}, {0, 5, 0}, {0, 0, 2}}, {{0, 1, 2}, {0, 1, 3}}};
+  Grid g;
+  MeshGridOptions o;
+  o.resolution = 64;
+  o.padding_voxels = 3;
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, o, &g)));
+  EXPECT_EQ(g.dims().x, 64);
+  EXPECT_NEAR(g.voxelSize(), 10.0 / 57, 1e-12);
+  EXPECT_NEAR(g.origin().x, -3 * g.voxelSize(), 1e-12);
+  // The mesh's far corner sits padding voxels inside the last voxel.
+  EXPECT_NEAR(g.indexOf({10, 0, 0}).x, 60, 1e-9);
+  EXPECT_GE(g.indexOf({0, 5, 2}).y, 0);
+  EXPECT_LE(g.indexOf({0, 5, 0}).y, g.dims().y - 1 - 3);
+  EXPECT_LE(g.indexOf({0, 0, 2}).z, g.dims().z - 1 - 3);
+}
+
+TEST(MeshGridTest, VoxelSizeAndExplicitBox) {
+  TriangleMesh mesh{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}};
+  Grid g;
+  MeshGridOptions o;
+  o.voxel_size = 0.1;
+  o.padding_voxels = 0;
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, o, &g)));
+  EXPECT_EQ(g.dims().x, 11);
+  EXPECT_EQ(g.dims().z, 1);
+  o.box_min = Vec3d{-1, -1, -1};
+  o.box_max = Vec3d{1, 1, 1};
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, o, &g)));
+  EXPECT_EQ(g.dims().x, 21);
+  EXPECT_EQ(g.origin(), (Vec3d{-1, -1, -1}));
+}
+
+TEST(MeshGridTest, RejectsBadOptions) {
+  TriangleMesh mesh{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}};
+  Grid g;
+  MeshGridOptions both;
+  both.voxel_size = 0.1, both.resolution = 10;
+  EXPECT_TRUE(IsError(gridForMesh(mesh, both, &g), Status::Code::kInvalidArgument, "exactly one of voxel size"));
+  MeshGridOptions none;
+  EXPECT_TRUE(IsError(gridForMesh(mesh, none, &g), Status::Code::kInvalidArgument, "exactly one of voxel size"));
+  MeshGridOptions tiny;
+  tiny.resolution = 6, tiny.padding_voxels = 3;
+  EXPECT_TRUE(IsError(gridForMesh(mesh, tiny, &g), Status::Code::kInvalidArgument, "padding"));
+  MeshGridOptions huge;
+  huge.voxel_size = 1e-9;
+  EXPECT_TRUE(IsError(gridForMesh(mesh, huge, &g), Status::Code::kInvalidArgument, "at most"));
+  MeshGridOptions box;
+  box.voxel_size = 0.1, box.box_min = Vec3d{1, 1, 1}, box.box_max = Vec3d{0, 0, 0};
+  EXPECT_TRUE(IsError(gridForMesh(mesh, box, &g), Status::Code::kInvalidArgument, "max corner must be >= its min"));
+}
+
+}  // namespace
+}  // namespace distband
