@@ -48,7 +48,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   // The budget bounds what is computed: the whole grid, or a tile's window.
   const distband::Grid computed = q.engineGrid();
   if (uint64_t(computed.voxelCount()) > f->options.max_voxels_per_query) __builtin_trap();
-  if (!q.grid.validate().empty() || !computed.validate().empty()) __builtin_trap();
+  if (!q.grid.validate().ok() || !computed.validate().ok()) __builtin_trap();
   if (q.touched_voxels_bound > uint64_t(computed.voxelCount())) __builtin_trap();
   if (q.tile) {
     const distband::VoxelBox whole{{}, q.grid.dims()};
