@@ -87,7 +87,7 @@ int run(int argc, char** argv) {
   Grid mesh_grid;
   MeshGridOptions go;
   go.resolution = n;
-  gridForMesh(mesh, go, &mesh_grid);
+  (void)gridForMesh(mesh, go, {}, &mesh_grid);
   const Grid grid({0, 0, 0}, 1.0, {n, n, n});
   const std::vector<Vec3d> two_points = {{n * 0.31, n * 0.42, n * 0.53}, {n * 0.77, n * 0.18, n * 0.66}};
   std::vector<uint8_t> shell;  // made on first use

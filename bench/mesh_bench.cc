@@ -25,6 +25,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <functional>
 #include <random>
@@ -59,6 +60,7 @@ using bench::Clock;
 using bench::since;
 
 using bench::peakRssMb;
+constexpr double kInf = std::numeric_limits<double>::infinity();
 
 struct Options {
   std::string mesh_dir = "/work/shared/data/meshes";
@@ -102,7 +104,7 @@ Grid gridFor(const TriangleMesh& mesh, int resolution, int padding) {
   MeshGridOptions go;
   go.resolution = resolution;
   go.padding_voxels = padding;
-  if (Status e = gridForMesh(mesh, go, &g); !e.ok()) throw std::runtime_error(e.toString());
+  if (Status e = gridForMesh(mesh, go, {}, &g); !e.ok()) throw std::runtime_error(e.toString());
   return g;
 }
 
@@ -294,7 +296,7 @@ json openvdbSuite(const Options& o) {
       MeshGridOptions go;
       go.voxel_size = base.voxelSize();
       go.padding_voxels = hw + 1;
-      if (Status e = gridForMesh(in.mesh, go, &grid); !e.ok()) throw std::runtime_error(e.toString());
+      if (Status e = gridForMesh(in.mesh, go, {kInf, double(hw)}, &grid); !e.ok()) throw std::runtime_error(e.toString());
       json row = {{"mesh", in.name}, {"res", o.openvdb_resolution}, {"half_width", hw},
                   {"dims", {grid.dims().x, grid.dims().y, grid.dims().z}}, {"threads", o.threads}};
       // distband exact-feature first: its delivered band gives the sample voxels.
@@ -415,7 +417,7 @@ json memoryCase(const Options& o) {
   MeshGridOptions go;
   go.voxel_size = base.voxelSize();
   go.padding_voxels = o.memory_half_width + 1;
-  if (Status e = gridForMesh(in.mesh, go, &grid); !e.ok()) throw std::runtime_error(e.toString());
+  if (Status e = gridForMesh(in.mesh, go, {kInf, double(o.memory_half_width)}, &grid); !e.ok()) throw std::runtime_error(e.toString());
   const double rss_before = peakRssMb();
   json row = {{"case", o.run_case}, {"mesh", in.name}, {"res", o.memory_resolution},
               {"half_width", o.memory_half_width}, {"threads", o.threads},

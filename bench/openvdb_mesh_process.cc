@@ -56,9 +56,11 @@ int main(int argc, char** argv) {
   if (distband::Status e = distband::loadMesh(mesh_path, &mesh, &report); !e.ok()) return fail(e.toString());
   distband::MeshGridOptions go;
   go.resolution = resolution;
-  go.limit_voxels = half_width;
   distband::Grid grid;
-  if (distband::Status e = distband::gridForMesh(mesh, go, &grid); !e.ok()) return fail(e.toString());
+  if (distband::Status e =
+          distband::gridForMesh(mesh, go, {std::numeric_limits<double>::infinity(), double(half_width)}, &grid);
+      !e.ok())
+    return fail(e.toString());
 
   std::vector<openvdb::Vec3s> points;
   std::vector<openvdb::Vec3I> triangles;

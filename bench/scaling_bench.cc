@@ -108,9 +108,8 @@ int main(int argc, char** argv) {
   }
   MeshGridOptions go;
   go.resolution = resolution;
-  go.limit_voxels = half_width;
   Grid grid;
-  if (Status e = gridForMesh(mesh, go, &grid); !e.ok()) {
+  if (Status e = gridForMesh(mesh, go, {std::numeric_limits<double>::infinity(), double(half_width)}, &grid); !e.ok()) {
     fmt::print(stderr, "{}\n", e.toString());
     return 2;
   }

@@ -209,7 +209,7 @@ int main(int argc, char** argv) {
       c.name = fmt::format("bunny, {}^3, full domain", resolution);
       MeshGridOptions mo;
       mo.resolution = resolution;
-      gridForMesh(mesh, mo, &c.grid);
+      (void)gridForMesh(mesh, mo, {}, &c.grid);
       c.options.segment_length_world = segment_voxels * c.grid.voxelSize();
       c.request.set_asset_id(mesh_id);
       c.request.mutable_grid()->set_resolution(uint32_t(resolution));
@@ -267,7 +267,7 @@ int main(int argc, char** argv) {
       req.mutable_grid()->set_resolution(uint32_t(load_resolution));
       MeshGridOptions mo;
       mo.resolution = load_resolution;
-      gridForMesh(mesh, mo, &ref_case.grid);
+      (void)gridForMesh(mesh, mo, {}, &ref_case.grid);
     } else {
       ref_case.grid = Grid({0, 0, 0}, 1.0, {load_resolution, load_resolution, load_resolution});
       const Vec3d p{load_resolution * 0.5, load_resolution * 0.5, load_resolution * 0.5};

@@ -80,9 +80,7 @@ Status buildMeshInput(const ComputeArgs& a, const FieldRequest& field, const Int
   go.resolution = a.resolution;
   go.voxel_size = a.voxel_size_given ? a.voxel_size : 0;
   if (a.padding >= 0) go.padding_voxels = a.padding;
-  go.limit_world = field.limit_world;
-  go.limit_voxels = field.limit_voxels;
-  if (Status s = gridForMesh(mesh, go, &in->grid, &in->padding); !s.ok()) return s;
+  if (Status s = gridForMesh(mesh, go, field.limit(), &in->grid, &in->padding); !s.ok()) return s;
   if (Status s = planField(field, in->grid, &report, &in->plan); !s.ok()) return s;
   SeedSource source;
   source.mesh = &mesh;

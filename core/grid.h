@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
 
 #include "core/status.h"
@@ -21,6 +22,13 @@ inline constexpr int kBrickVoxels = kBrickSize * kBrickSize * kBrickSize;
 inline constexpr int kMaxGridDim = 16384;
 
 /// A box of voxels, [min, min + dims) along each axis (a tile of a grid, or the part of it a tile delivers).
+/// A distance limit as a request gives it: in voxels of the grid when voxels > 0, else in world units (+infinity:
+/// none). The grid (its padding holds the limit) and the plan read the same one.
+struct DistanceLimit {
+  double world = std::numeric_limits<double>::infinity();
+  double voxels = 0;
+};
+
 struct VoxelBox {
   Coord min{};
   Coord dims{};

@@ -119,8 +119,6 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, con
   mo.voxel_size = g.voxel_size();
   mo.resolution = int(g.resolution());
   if (g.has_padding()) mo.padding_voxels = int(g.padding());
-  mo.limit_world = field.limit_world;
-  mo.limit_voxels = field.limit_voxels;
   TriangleMesh point_bounds;  // gridForMesh reads only the vertices' bounds
   const TriangleMesh* bounds = &point_bounds;
   if (g.has_box()) {  // way b
@@ -136,7 +134,7 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, con
       point_bounds.vertices = q.points;
     }
   }
-  return gridForMesh(*bounds, mo, grid, padding).withPrefix("grid");
+  return gridForMesh(*bounds, mo, field.limit(), grid, padding).withPrefix("grid");
 }
 
 Status resolveBox(const v1::VoxelBox& b, const Grid& grid, const char* field, VoxelBox* out) {

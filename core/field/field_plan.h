@@ -51,6 +51,8 @@ struct FieldRequest {
   /// The limit: in voxels of the grid when limit_voxels > 0, else in world units (+infinity: none).
   double limit_world = std::numeric_limits<double>::infinity();
   double limit_voxels = 0;
+  /// The limit as the grid's padding reads it (gridForMesh): the same request fields.
+  DistanceLimit limit() const { return {limit_world, limit_voxels}; }
   double segment_length_world = 0;  ///< 0: one segment
   bool closest_features = false;
   std::optional<bool> second_ring;  ///< unset: the engine's default for the site kind

@@ -13,17 +13,17 @@ namespace {
 // default with p * h >= limit, where h depends on p when the grid is sized by its resolution N
 // (h = longest / (N - 1 - 2p)); then p >= L (N - 1) / (longest + 2L) in world units.
 // Beyond the cap the band is clipped (gridForMesh reports it).
-int paddingForLimit(const MeshGridOptions& o, double longest) {
-  const bool in_voxels = o.limit_voxels > 0;
-  if (!(in_voxels ? std::isfinite(o.limit_voxels) : std::isfinite(o.limit_world))) return kDefaultPaddingVoxels;
+int paddingForLimit(const MeshGridOptions& o, const DistanceLimit& limit, double longest) {
+  const bool in_voxels = limit.voxels > 0;
+  if (!(in_voxels ? std::isfinite(limit.voxels) : std::isfinite(limit.world))) return kDefaultPaddingVoxels;
   double need = 0;  // voxels
   int cap = kMaxPaddingVoxels;
   if (o.resolution > 0) {
     cap = std::min(cap, std::max(0, (o.resolution - 1) / 4));  // the bounds keep at least half of the N voxels
-    need = in_voxels ? o.limit_voxels
-                     : (longest > 0 ? o.limit_world * (o.resolution - 1) / (longest + 2 * o.limit_world) : 0);
+    need = in_voxels ? limit.voxels
+                     : (longest > 0 ? limit.world * (o.resolution - 1) / (longest + 2 * limit.world) : 0);
   } else {
-    need = in_voxels ? o.limit_voxels : o.limit_world / o.voxel_size;
+    need = in_voxels ? limit.voxels : limit.world / o.voxel_size;
   }
   // The slack keeps an exact integer (limit 5 voxels -> 5) from rounding up.
   const double p = std::max<double>(kDefaultPaddingVoxels, std::ceil(need - 1e-9));
@@ -32,7 +32,8 @@ int paddingForLimit(const MeshGridOptions& o, double longest) {
 
 }  // namespace
 
-Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid* grid, GridPadding* padding_out) {
+Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, const DistanceLimit& limit, Grid* grid,
+                   GridPadding* padding_out) {
   if ((o.voxel_size > 0) == (o.resolution > 0))
     return Status::InvalidArgument("give exactly one of voxel size (> 0) and resolution (> 0)");
   if (o.voxel_size > 0 && !std::isfinite(o.voxel_size)) return Status::InvalidArgument("voxel size must be finite");
@@ -62,7 +63,7 @@ Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid* gri
   } else if (o.box_min) {
     padding.voxels = 0;
   } else {
-    padding.voxels = paddingForLimit(o, longest);
+    padding.voxels = paddingForLimit(o, limit, longest);
   }
   double h = o.voxel_size;
   if (o.resolution > 0) {
@@ -74,7 +75,7 @@ Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, Grid* gri
     h = longest / span;
   }
   if (!o.box_min) {
-    const double limit_voxels = o.limit_voxels > 0 ? o.limit_voxels : o.limit_world / h;
+    const double limit_voxels = limit.voxels > 0 ? limit.voxels : limit.world / h;
     padding.band_clipped = std::isfinite(limit_voxels) && padding.voxels < limit_voxels - 1e-9;
   }
   const double pad = padding.voxels;

@@ -31,9 +31,6 @@ struct MeshGridOptions {
   int resolution = 0;      ///< > 0 selects sizing by the longest side (mutually exclusive with voxel_size)
   /// Margin on every side, in voxels, in [0, kMaxPaddingVoxels]. Unset: the default described above.
   std::optional<int> padding_voxels;
-  /// The query's distance limit, for the default padding: in world units, or in voxels when limit_voxels > 0.
-  double limit_world = std::numeric_limits<double>::infinity();
-  double limit_voxels = 0;
   /// Explicit world box instead of the mesh's bounding box (padding still applies).
   std::optional<Vec3d> box_min, box_max;
 };
@@ -44,7 +41,8 @@ struct GridPadding {
   bool band_clipped = false;  ///< fitted around the bounds with a padding below the limit in voxels
 };
 
-Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& options, Grid* grid,
-                        GridPadding* padding = nullptr);
+/// `limit`: the request's distance limit (FieldRequest::limit()), which the default padding holds.
+Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& options, const DistanceLimit& limit, Grid* grid,
+                   GridPadding* padding = nullptr);
 
 }  // namespace distband

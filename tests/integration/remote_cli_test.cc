@@ -70,9 +70,8 @@ TEST(RemoteCliTest, QueryWritesALevelSetVdbThatMatchesTheEngine) {
   ASSERT_TRUE(IsOk(loadMesh(f.path("cube.obj"), &mesh, nullptr)));
   MeshGridOptions mo;
   mo.resolution = 40;
-  mo.limit_world = limit;  // the default padding holds the limit
   Grid grid;
-  ASSERT_TRUE(IsOk(gridForMesh(mesh, mo, &grid)));
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, mo, {limit, 0}, &grid)));  // the default padding holds the limit
   MeshSeedOptions so;
   so.limit_voxels = limit / grid.voxelSize();
   Seeds seeds;

@@ -256,7 +256,7 @@ TEST(ServiceTest, MeshUploadInChunksAndQueryMatchInProcess) {
   mo.resolution = 40;
   mo.padding_voxels = 4;
   Grid grid;
-  ASSERT_TRUE(IsOk(gridForMesh(mesh, mo, &grid)));
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, mo, {}, &grid)));
   EXPECT_EQ(s.result.grid.dims(), grid.dims());
   EXPECT_EQ(s.result.grid.origin(), grid.origin());
   EXPECT_EQ(s.result.grid.voxelSize(), grid.voxelSize());

@@ -47,11 +47,9 @@ TEST(FieldDefaultsTest, DefaultPaddingHoldsTheLimit) {
     MeshGridOptions o;
     o.voxel_size = c.voxel_size;
     o.resolution = c.resolution;
-    o.limit_world = c.limit_world;
-    o.limit_voxels = c.limit_voxels;
     Grid g;
     GridPadding p;
-    ASSERT_TRUE(IsOk(gridForMesh(box, o, &g, &p)));
+    ASSERT_TRUE(IsOk(gridForMesh(box, o, {c.limit_world, c.limit_voxels}, &g, &p)));
     if (c.expect_padding >= 0) {
       EXPECT_EQ(p.voxels, c.expect_padding) << c.voxel_size << " " << c.limit_world;
     }
@@ -71,28 +69,25 @@ TEST(FieldDefaultsTest, ExplicitOrCappedPaddingReportsAClippedBand) {
   const TriangleMesh box = unitBox();
   MeshGridOptions o;
   o.voxel_size = 0.1;
-  o.limit_world = 0.5;
   o.padding_voxels = 2;  // explicit wins, but clips a 5-voxel band
   Grid g;
   GridPadding p;
-  ASSERT_TRUE(IsOk(gridForMesh(box, o, &g, &p)));
+  ASSERT_TRUE(IsOk(gridForMesh(box, o, {0.5, 0}, &g, &p)));
   EXPECT_EQ(p.voxels, 2);
   EXPECT_TRUE(p.band_clipped);
   // A limit far larger than the object at a fixed resolution: the object keeps half the voxels, the band is clipped.
   MeshGridOptions r;
   r.resolution = 65;
-  r.limit_world = 100;
-  ASSERT_TRUE(IsOk(gridForMesh(box, r, &g, &p)));
+  ASSERT_TRUE(IsOk(gridForMesh(box, r, {100, 0}, &g, &p)));
   EXPECT_EQ(p.voxels, 16);
   EXPECT_TRUE(p.band_clipped);
   EXPECT_NEAR(g.voxelSize(), 1.0 / 32, 1e-12);
   // An explicit box is the region asked for: no margin by default, nothing reported clipped.
   MeshGridOptions b;
   b.voxel_size = 0.1;
-  b.limit_world = 0.5;
   b.box_min = Vec3d{0, 0, 0};
   b.box_max = Vec3d{1, 1, 1};
-  ASSERT_TRUE(IsOk(gridForMesh(box, b, &g, &p)));
+  ASSERT_TRUE(IsOk(gridForMesh(box, b, {0.5, 0}, &g, &p)));
   EXPECT_EQ(p.voxels, 0);
   EXPECT_FALSE(p.band_clipped);
 }
@@ -229,9 +224,8 @@ TEST(FieldDefaultsTest, OpenTeapotGetsTheWindingSignByDefault) {
   ASSERT_FALSE(report.closed());
   MeshGridOptions go;
   go.resolution = 40;
-  go.limit_voxels = 3;
   Grid grid;
-  ASSERT_TRUE(IsOk(gridForMesh(mesh, go, &grid)));
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, go, {kInf, 3}, &grid)));
   auto wrongSigns = [&](SignMethod requested) {
     MeshSeedOptions so;
     so.sign = resolveSignMethod(requested, report, nullptr);

@@ -183,7 +183,7 @@ TEST(MeshGridTest, ResolutionSpansTheLongestSideIncludingPadding) {
   MeshGridOptions o;
   o.resolution = 64;
   o.padding_voxels = 3;
-  ASSERT_TRUE(IsOk(gridForMesh(mesh, o, &g)));
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, o, {}, &g)));
   EXPECT_EQ(g.dims().x, 64);
   EXPECT_NEAR(g.voxelSize(), 10.0 / 57, 1e-12);
   EXPECT_NEAR(g.origin().x, -3 * g.voxelSize(), 1e-12);
@@ -200,12 +200,12 @@ TEST(MeshGridTest, VoxelSizeAndExplicitBox) {
   MeshGridOptions o;
   o.voxel_size = 0.1;
   o.padding_voxels = 0;
-  ASSERT_TRUE(IsOk(gridForMesh(mesh, o, &g)));
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, o, {}, &g)));
   EXPECT_EQ(g.dims().x, 11);
   EXPECT_EQ(g.dims().z, 1);
   o.box_min = Vec3d{-1, -1, -1};
   o.box_max = Vec3d{1, 1, 1};
-  ASSERT_TRUE(IsOk(gridForMesh(mesh, o, &g)));
+  ASSERT_TRUE(IsOk(gridForMesh(mesh, o, {}, &g)));
   EXPECT_EQ(g.dims().x, 21);
   EXPECT_EQ(g.origin(), (Vec3d{-1, -1, -1}));
 }
@@ -215,18 +215,18 @@ TEST(MeshGridTest, RejectsBadOptions) {
   Grid g;
   MeshGridOptions both;
   both.voxel_size = 0.1, both.resolution = 10;
-  EXPECT_TRUE(IsError(gridForMesh(mesh, both, &g), Status::Code::kInvalidArgument, "exactly one of voxel size"));
+  EXPECT_TRUE(IsError(gridForMesh(mesh, both, {}, &g), Status::Code::kInvalidArgument, "exactly one of voxel size"));
   MeshGridOptions none;
-  EXPECT_TRUE(IsError(gridForMesh(mesh, none, &g), Status::Code::kInvalidArgument, "exactly one of voxel size"));
+  EXPECT_TRUE(IsError(gridForMesh(mesh, none, {}, &g), Status::Code::kInvalidArgument, "exactly one of voxel size"));
   MeshGridOptions tiny;
   tiny.resolution = 6, tiny.padding_voxels = 3;
-  EXPECT_TRUE(IsError(gridForMesh(mesh, tiny, &g), Status::Code::kInvalidArgument, "padding"));
+  EXPECT_TRUE(IsError(gridForMesh(mesh, tiny, {}, &g), Status::Code::kInvalidArgument, "padding"));
   MeshGridOptions huge;
   huge.voxel_size = 1e-9;
-  EXPECT_TRUE(IsError(gridForMesh(mesh, huge, &g), Status::Code::kInvalidArgument, "at most"));
+  EXPECT_TRUE(IsError(gridForMesh(mesh, huge, {}, &g), Status::Code::kInvalidArgument, "at most"));
   MeshGridOptions box;
   box.voxel_size = 0.1, box.box_min = Vec3d{1, 1, 1}, box.box_max = Vec3d{0, 0, 0};
-  EXPECT_TRUE(IsError(gridForMesh(mesh, box, &g), Status::Code::kInvalidArgument, "max corner must be >= its min"));
+  EXPECT_TRUE(IsError(gridForMesh(mesh, box, {}, &g), Status::Code::kInvalidArgument, "max corner must be >= its min"));
 }
 
 }  // namespace

@@ -41,7 +41,7 @@ Grid gridFor(const TriangleMesh& mesh, int resolution, int padding) {
   MeshGridOptions o;
   o.resolution = resolution;
   o.padding_voxels = padding;
-  EXPECT_TRUE(IsOk(gridForMesh(mesh, o, &g)));
+  EXPECT_TRUE(IsOk(gridForMesh(mesh, o, {}, &g)));
   return g;
 }
 
