@@ -56,7 +56,7 @@ class SegmentMerger {
   SegmentMerger(Config config, Sink sink);
 
   /// A BrickBatch message of `tile`'s stream. RESOURCE_EXHAUSTED (naming --tile-buffer-bytes) when holding it would
-  /// pass the buffer bound; the merge has then failed.
+  /// pass the buffer bound; the merge has then failed (as after abort()).
   Status onBatch(size_t tile, Message batch);
   void onSegmentDone(size_t tile, const v1::SegmentDone& done);
   void onSummary(size_t tile, const v1::QuerySummary& summary);
