@@ -418,14 +418,20 @@ v1::PropagationMode modeOf(const FieldPlan& plan) {
   return plan.mode == PropagationMode::kPaper ? v1::PROPAGATION_MODE_PAPER : v1::PROPAGATION_MODE_EXACT;
 }
 
+v1::Dims dimsOf(const Coord& c) {
+  v1::Dims d;
+  d.set_x(uint32_t(c.x));
+  d.set_y(uint32_t(c.y));
+  d.set_z(uint32_t(c.z));
+  return d;
+}
+
 void fillQueryHeader(const ResolvedQuery& q, const std::string& query_id, v1::QueryHeader* h) {
   h->mutable_origin()->set_x(q.grid.origin().x);
   h->mutable_origin()->set_y(q.grid.origin().y);
   h->mutable_origin()->set_z(q.grid.origin().z);
   h->set_voxel_size(q.grid.voxelSize());
-  h->mutable_dims()->set_x(q.grid.dims().x);
-  h->mutable_dims()->set_y(q.grid.dims().y);
-  h->mutable_dims()->set_z(q.grid.dims().z);
+  *h->mutable_dims() = dimsOf(q.grid.dims());
   h->set_limit(q.plan.limit_world);
   h->set_signed_(q.plan.signedField());
   h->set_encoding(q.encoding);

@@ -67,6 +67,8 @@ v1::Stencil stencilOf(const FieldPlan& plan);
 v1::PropagationMode modeOf(const FieldPlan& plan);
 /// What BrickData.closest carries for this plan (NONE unless it asks for closest features).
 v1::ClosestFeature closestOf(const FieldPlan& plan);
+/// Voxel counts as the protocol sends them.
+v1::Dims dimsOf(const Coord& dims);
 
 /// The header message describing a resolved query (first message of the stream).
 void fillQueryHeader(const ResolvedQuery& query, const std::string& query_id, v1::QueryHeader* header);

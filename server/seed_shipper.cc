@@ -1,0 +1,232 @@
+#include "server/seed_shipper.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <memory>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "core/mesh/ply_writer.h"
+#include "server/asset_parsing.h"
+#include "server/grpc_status.h"
+
+namespace distband {
+namespace {
+
+constexpr size_t kUploadChunkBytes = size_t(1) << 20;
+
+std::string boxKey(const VoxelBox& b) {
+  return fmt::format("{},{},{},{},{},{}", b.min.x, b.min.y, b.min.z, b.dims.x, b.dims.y, b.dims.z);
+}
+
+/// The window's voxels of a whole-grid mask (x fastest).
+std::string cropMask(const std::vector<uint8_t>& mask, const Coord& dims, const VoxelBox& window) {
+  std::string out(size_t(window.voxelCount()), '\0');
+  size_t o = 0;
+  for (int z = window.min.z; z < window.end().z; ++z)
+    for (int y = window.min.y; y < window.end().y; ++y) {
+      const size_t row = (size_t(z) * dims.y + y) * dims.x + window.min.x;
+      std::copy_n(reinterpret_cast<const char*>(mask.data()) + row, window.dims.x, out.data() + o);
+      o += size_t(window.dims.x);
+    }
+  return out;
+}
+
+/// Squared index-space distance from p to the box's voxels.
+double dist2ToBox(const Vec3d& p, const VoxelBox& b) {
+  auto axis = [](double v, int lo, int hi) { return v < lo ? lo - v : (v > hi ? v - hi : 0.0); };
+  const double dx = axis(p.x, b.min.x, b.end().x - 1), dy = axis(p.y, b.min.y, b.end().y - 1),
+               dz = axis(p.z, b.min.z, b.end().z - 1);
+  return dx * dx + dy * dy + dz * dz;
+}
+
+template <typename Chunk>
+Status streamUpload(std::unique_ptr<grpc::ClientWriter<Chunk>> writer, const std::string& bytes, Chunk first,
+                    const v1::UploadReply& reply, const std::string& id) {
+  for (size_t off = 0; off == 0 || off < bytes.size(); off += kUploadChunkBytes) {
+    Chunk chunk = off == 0 ? first : Chunk();
+    chunk.set_data(bytes.substr(off, kUploadChunkBytes));
+    if (!writer->Write(chunk)) break;
+  }
+  writer->WritesDone();
+  const grpc::Status s = writer->Finish();
+  if (!s.ok()) return fromGrpcStatus(s);
+  if (reply.asset_id() != id)
+    return Status::Internal(fmt::format("the replica named the upload {} instead of {}", reply.asset_id(), id));
+  return Status::Ok();
+}
+
+}  // namespace
+
+SeedShipper::SeedShipper(const ResolvedQuery& query, const ServerOptions& options, ReplicaPool& pool,
+                         const std::vector<TilePlan>& tiles)
+    : query_(query), options_(options), pool_(pool), tiles_(tiles), point_index_(tiles.size()),
+      mesh_reach_(meshReach()) {
+  if (query_.seed_kind != ResolvedQuery::SeedKind::kPoints) return;
+  // Only points that can reach the tile within the limit, in their original order (ties go to the lower index).
+  const double reach = query_.plan.limitVoxels(query_.grid) + 1;
+  for (size_t t = 0; t < tiles_.size(); ++t)
+    for (size_t i = 0; i < query_.points.size(); ++i)
+      if (!std::isfinite(reach) || dist2ToBox(query_.grid.indexOf(query_.points[i]), tiles_[t].deliver) <= reach * reach)
+        point_index_[t].push_back(uint32_t(i));
+}
+
+std::vector<bool> SeedShipper::meshReach() const {
+  // With a limit, a tile no triangle comes within the limit of delivers nothing: its call is skipped (a surface in
+  // a large grid touches few tiles). Each triangle marks the tiles its box, grown by the limit, overlaps.
+  std::vector<bool> reach(tiles_.size(), true);
+  const double limit = query_.plan.limitVoxels(query_.grid);
+  if (query_.seed_kind != ResolvedQuery::SeedKind::kMesh || !std::isfinite(limit) || tiles_.empty()) return reach;
+  std::fill(reach.begin(), reach.end(), false);
+  // Tiles form a regular lattice (planTiles): the first tile's size is the step, ordered x fastest.
+  const Coord step = tiles_[0].deliver.dims, dims = query_.grid.dims();
+  const Coord count{(dims.x + step.x - 1) / step.x, (dims.y + step.y - 1) / step.y, (dims.z + step.z - 1) / step.z};
+  const TriangleMesh& mesh = *query_.asset->mesh;
+  auto range = [&](double lo, double hi, int s, int n, int* a, int* b) {
+    *a = int(std::clamp(std::floor((lo - limit - 1) / s), 0.0, double(n - 1)));
+    *b = int(std::clamp(std::floor((hi + limit + 1) / s), 0.0, double(n - 1)));
+    return hi + limit + 1 >= 0 && lo - limit - 1 <= double(n) * s;
+  };
+  for (const auto& t : mesh.triangles) {
+    const Vec3d a = query_.grid.indexOf(mesh.vertices[t[0]]), b = query_.grid.indexOf(mesh.vertices[t[1]]),
+                c = query_.grid.indexOf(mesh.vertices[t[2]]);
+    int x0, x1, y0, y1, z0, z1;
+    if (!range(std::min({a.x, b.x, c.x}), std::max({a.x, b.x, c.x}), step.x, count.x, &x0, &x1) ||
+        !range(std::min({a.y, b.y, c.y}), std::max({a.y, b.y, c.y}), step.y, count.y, &y0, &y1) ||
+        !range(std::min({a.z, b.z, c.z}), std::max({a.z, b.z, c.z}), step.z, count.z, &z0, &z1))
+      continue;
+    for (int z = z0; z <= z1; ++z)
+      for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) reach[(size_t(z) * count.y + y) * count.x + x] = true;
+  }
+  return reach;
+}
+
+bool SeedShipper::addSeeds(size_t tile, v1::QueryRequest* r) const {
+  if (!mesh_reach_[tile]) return false;
+  const VoxelBox& window = tiles_[tile].window;
+  switch (query_.seed_kind) {
+    case ResolvedQuery::SeedKind::kPoints: {
+      r->mutable_points();  // set even when no point is within reach (then the tile is not sent)
+      for (const uint32_t i : point_index_[tile]) {
+        v1::Vec3* v = r->mutable_points()->add_points();
+        v->set_x(query_.points[i].x);
+        v->set_y(query_.points[i].y);
+        v->set_z(query_.points[i].z);
+      }
+      return r->points().points_size() > 0;
+    }
+    case ResolvedQuery::SeedKind::kMesh: r->set_asset_id(mesh_id_); return true;
+    case ResolvedQuery::SeedKind::kVolume: {
+      if (const auto id = volume_ids_.find(boxKey(window)); id != volume_ids_.end()) {
+        r->set_asset_id(id->second.second);
+        return true;
+      }
+      *r->mutable_volume()->mutable_dims() = dimsOf(window.dims);
+      r->mutable_volume()->set_mask(cropMask(*query_.asset->mask, query_.asset->dims, window));
+      const std::string& m = r->volume().mask();
+      const bool any_seed = std::any_of(m.begin(), m.end(), [](char c) { return c != 0; });
+      const bool any_free = std::any_of(m.begin(), m.end(), [](char c) { return c == 0; });
+      return any_seed && (any_free || !query_.plan.inside_negative);
+    }
+  }
+  return true;
+}
+
+Status SeedShipper::ship(TileDispatcher& calls) {
+  if (query_.seed_kind == ResolvedQuery::SeedKind::kMesh) {
+    if (mesh_bytes_.empty()) {
+      mesh_bytes_ = encodeBinaryPly(*query_.asset->mesh);
+      mesh_id_ = meshAssetId(mesh_bytes_, v1::MESH_FORMAT_PLY);
+    }
+    return uploadToReplicas(mesh_id_, calls, [&](v1::DistanceField::Stub& stub, grpc::ClientContext* context) {
+      v1::UploadReply reply;
+      v1::UploadMeshChunk first;
+      first.mutable_header()->set_format(v1::MESH_FORMAT_PLY);
+      first.mutable_header()->set_total_bytes(mesh_bytes_.size());
+      first.mutable_header()->set_name(query_.asset->name.substr(0, 200));
+      return streamUpload(stub.UploadMesh(context, &reply), mesh_bytes_, first, reply, mesh_id_);
+    });
+  }
+  if (query_.seed_kind == ResolvedQuery::SeedKind::kVolume) {
+    const uint64_t inline_limit = options_.max_message_bytes / 2;
+    const bool planning = !volumes_planned_;
+    if (planning) {
+      for (const TilePlan& t : tiles_)
+        if (uint64_t(t.window.voxelCount()) > inline_limit) volume_ids_[boxKey(t.window)] = {t.window, ""};
+      volumes_planned_ = true;
+    }
+    for (auto& [key, entry] : volume_ids_) {
+      const std::string bytes = cropMask(*query_.asset->mask, query_.asset->dims, entry.first);
+      const v1::Dims dims = dimsOf(entry.first.dims);
+      if (planning) entry.second = volumeAssetId(dims, bytes);
+      const std::string& id = entry.second;
+      Status s = uploadToReplicas(id, calls, [&](v1::DistanceField::Stub& stub, grpc::ClientContext* context) {
+        v1::UploadReply reply;
+        v1::UploadVolumeChunk first;
+        *first.mutable_header()->mutable_dims() = dims;
+        return streamUpload(stub.UploadVolume(context, &reply), bytes, first, reply, id);
+      });
+      if (!s.ok()) return s;
+    }
+  }
+  return Status::Ok();
+}
+
+void SeedShipper::forgetUploads() {
+  std::lock_guard lock(mu_);
+  uploaded_.clear();
+}
+
+Status SeedShipper::uploadToReplicas(const std::string& id, TileDispatcher& calls, const Upload& upload) {
+  const auto replicas = pool_.replicas();
+  int present = 0;
+  std::string last_error = "no replica resolves";
+  for (const ReplicaPool::Replica& r : replicas) {
+    if (Status stopped = calls.stopReason(); !stopped.ok()) return stopped;
+    {
+      std::lock_guard lock(mu_);
+      if (uploaded_.count({r.address, id})) {
+        ++present;
+        continue;
+      }
+    }
+    auto stub = v1::DistanceField::NewStub(r.channel);
+    grpc::ClientContext context;
+    Status s;
+    {
+      TileDispatcher::Call call(calls, &context);
+      s = upload(*stub, &context);
+    }
+    std::lock_guard lock(mu_);
+    if (s.ok()) {
+      uploaded_.insert({r.address, id});
+      ++present;
+    } else {
+      last_error = fmt::format("{}: {} {}", r.address, Status::codeName(s.code()), s.message());
+      spdlog::warn("coordinator: uploading {} to replica {} failed: {}", id.substr(0, 17), r.address, last_error);
+    }
+  }
+  // A replica that missed it answers NOT_FOUND to a tile, which uploads again and retries.
+  if (present > 0) return Status::Ok();
+  return Status::Unavailable(fmt::format("could not pass the seeds on to any replica of --peers {} ({})",
+                                         pool_.target(), last_error));
+}
+
+void SeedShipper::toQueryPointIds(size_t tile, v1::BrickBatch* batch) const {
+  if (closestOf(query_.plan) != v1::CLOSEST_FEATURE_POINT) return;
+  const std::vector<uint32_t>& point_index = point_index_[tile];
+  for (v1::BrickData& b : *batch->mutable_bricks()) {
+    std::string& ids = *b.mutable_closest();
+    for (size_t at = 0; at + 4 <= ids.size(); at += 4) {
+      int32_t id;
+      std::memcpy(&id, ids.data() + at, 4);
+      id = id >= 0 && size_t(id) < point_index.size() ? int32_t(point_index[size_t(id)]) : -1;
+      std::memcpy(ids.data() + at, &id, 4);
+    }
+  }
+}
+
+}  // namespace distband
