@@ -275,6 +275,12 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
     case v1::STENCIL_FCC12: fr.stencil = StencilKind::kFcc12; break;
     default: return invalid(fmt::format("stencil must be a Stencil value 0..4 (got {})", int(r.stencil())));
   }
+  switch (r.algorithm()) {
+    case v1::ALGORITHM_UNSPECIFIED: break;
+    case v1::ALGORITHM_BAND: fr.algorithm = FieldAlgorithm::kBand; break;
+    case v1::ALGORITHM_SEPARABLE: fr.algorithm = FieldAlgorithm::kSeparable; break;
+    default: return invalid(fmt::format("algorithm must be an Algorithm value 0..2 (got {})", int(r.algorithm())));
+  }
   switch (r.mode()) {
     case v1::PROPAGATION_MODE_UNSPECIFIED: break;
     case v1::PROPAGATION_MODE_EXACT: fr.mode = PropagationMode::kExact; break;

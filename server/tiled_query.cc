@@ -20,10 +20,12 @@ uint64_t TiledQuery::reservedBytes(const ServerOptions& o) { return o.stream_buf
 
 std::vector<TilePlan> TiledQuery::plan(const ResolvedQuery& q, uint64_t tile_voxels) {
   int halo = tileHalo(q.plan.limitVoxels(q.grid));
-  // Without a limit every seed can reach every voxel. Point sites outside a window still give exact distances (the
-  // engine seeds them at the window's face and is exact for sites outside its grid), so a margin suffices; mesh and
-  // volume seeds outside a window would be lost, so their windows are the whole grid.
-  if (halo < 0 && q.seed_kind == ResolvedQuery::SeedKind::kPoints) halo = 2 * kBrickSize;
+  // Without a limit every seed can reach every voxel. The separable point EDT is exact for points outside its grid,
+  // so a margin suffices there; the band in a window is not (two points outside it can seed the same face voxels and
+  // the farther one never enters), and mesh and volume seeds outside a window would be lost: their windows are the
+  // whole grid.
+  if (halo < 0 && q.seed_kind == ResolvedQuery::SeedKind::kPoints && q.plan.algorithm == FieldAlgorithm::kSeparable)
+    halo = 2 * kBrickSize;
   return planTiles(q.grid.dims(), tile_voxels, halo);
 }
 
@@ -88,7 +90,9 @@ std::optional<v1::QueryRequest> TiledQuery::request(size_t tile) {
   g->mutable_origin()->set_z(q.grid.origin().z);
   g->set_voxel_size(q.grid.voxelSize());
   *g->mutable_dims() = dimsOf(q.grid.dims());
-  r.set_stencil(stencilOf(q.plan));
+  // The whole grid's algorithm, so a tile's values are the whole grid's (a separable plan takes no stencil).
+  r.set_algorithm(q.plan.algorithm == FieldAlgorithm::kSeparable ? v1::ALGORITHM_SEPARABLE : v1::ALGORITHM_BAND);
+  if (q.plan.algorithm == FieldAlgorithm::kBand) r.set_stencil(stencilOf(q.plan));
   r.set_mode(modeOf(q.plan));
   r.set_sign(signOf(q.plan));
   r.set_encoding(q.encoding);

@@ -2,9 +2,10 @@
 // Contract (QueryStream, server/query_stream.h):
 //   * The grid is cut into tiles of whole bricks (core/field/tiling.h, at most --tile-voxels each). Each tile is one Query
 //     call (QueryRequest.tile) on the round_robin channel of the ReplicaPool, so balancing is per tile; at most
-//     --tiles-in-flight calls per replica run at once (and at most 128 per query: one thread each). The tile's window is the tile grown by the limit plus two
-//     bricks; without a limit, point seeds still use that margin (the engine is exact for sites outside its grid),
-//     while meshes and volumes need the whole grid in every window (each tile then costs a whole computation).
+//     --tiles-in-flight calls per replica run at once (and at most 128 per query: one thread each). The tile's window
+//     is the tile grown by the limit plus two bricks; without a limit, point seeds on the separable point EDT (exact
+//     for points outside its grid) still use that margin, while the band and meshes and volumes need the whole grid
+//     in every window (each tile then costs a whole computation). Every tile runs the whole grid's algorithm.
 //   * Seeds travel as follows: points inline, only those within the limit of the tile (order kept, so ties resolve
 //     as on one server); a tile no seed comes within the limit of is not sent at all; meshes once per replica as a canonical binary PLY (content-addressed, remembered); volumes
 //     as the window's crop, inline when small, else uploaded to every replica.

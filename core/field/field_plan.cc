@@ -98,11 +98,19 @@ Status planField(const FieldRequest& r, const Grid& grid, const MeshReport* mesh
   // propagation itself, and a volume's closest features come from the propagation's sites. Point seeds on few lattice
   // planes take the separable point EDT over the whole grid; with a limit the band's work follows the limit instead.
   const bool propagation_asked = p.mode != PropagationMode::kExact || r.stencil || r.second_ring;
-  if (r.seeds == SeedKind::kVolume && !propagation_asked && !r.closest_features)
+  const bool separable_applies =
+      !propagation_asked && ((r.seeds == SeedKind::kVolume && !r.closest_features) ||
+                             (r.seeds == SeedKind::kPoints && std::isinf(p.limit_world)));
+  if (r.algorithm) {
+    if (*r.algorithm == FieldAlgorithm::kSeparable && !separable_applies)
+      return Status::InvalidArgument(
+          "algorithm: separable applies to seed volumes without closest features and to point seeds without a "
+          "limit, in exact mode with the default stencil and no second ring");
+    p.algorithm = *r.algorithm;
+  } else if (separable_applies && (r.seeds == SeedKind::kVolume ||
+                                   (r.point_layout && separablePointsPay(grid.dims(), *r.point_layout)))) {
     p.algorithm = FieldAlgorithm::kSeparable;
-  if (r.seeds == SeedKind::kPoints && !propagation_asked && std::isinf(p.limit_world) && r.point_layout &&
-      separablePointsPay(grid.dims(), *r.point_layout))
-    p.algorithm = FieldAlgorithm::kSeparable;
+  }
   *out = std::move(p);
   return Status::Ok();
 }

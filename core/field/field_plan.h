@@ -1,9 +1,9 @@
 // FieldPlan: the one place the defaults of a distance-field request are decided, for every caller — the server's
 // request validation, `distband compute` and the benches — so a default changes in one line.
 // Contract: planField() turns a FieldRequest (any choice may be left unset) into a FieldPlan where every choice is
-// made: the algorithm (in exact mode with no stencil or second ring asked for: the separable EDT for a seed volume
-// without closest features, and for point seeds without a limit that lie on few lattice planes (separablePointsPay);
-// the band otherwise), propagation mode (exact), site kind (triangles for meshes in exact mode, points otherwise), stencil
+// made: the algorithm (the request's when it names one; else, in exact mode with no stencil or second ring asked for,
+// the separable EDT for a seed volume without closest features and for point seeds without a limit that lie on few
+// lattice planes (separablePointsPay); the band otherwise), propagation mode (exact), site kind (triangles for meshes in exact mode, points otherwise), stencil
 // (defaultStencil of the site kind), sign (meshes: kDefaultMeshSign, auto, resolved on the mesh's edges with the
 // reason; points unsigned; volumes unsigned unless inside_negative), and the limit in world units. The grid comes
 // first (core/mesh/mesh_grid.h decides its padding from the same limit): a limit given in voxels needs its voxel
@@ -58,6 +58,9 @@ struct FieldRequest {
   std::optional<bool> second_ring;  ///< unset: the engine's default for the site kind
   /// Point seeds: how they lie on the lattice (pointLayout of their world or index coordinates). Unset: the band.
   std::optional<PointLayout> point_layout;
+  /// Unset: the planner's choice. kSeparable applies to seed volumes without closest features and to point seeds
+  /// without a limit, in exact mode with no stencil or second ring asked for (kInvalidArgument otherwise).
+  std::optional<FieldAlgorithm> algorithm;
 };
 
 struct FieldPlan {

@@ -112,6 +112,27 @@ TEST(ScaleOutTest, PointFieldsAreBitIdenticalToOneServerAndNearestFirst) {
   }
 }
 
+// Points outside a tile's window reach it through the whole grid's algorithm: with the separable point EDT (which
+// one server picks for these three points) every tile is exact. The band in a window is not: two points outside it
+// can seed the same face voxels and the farther one never enters (0.61 voxel off here before the coordinator sent
+// its algorithm).
+TEST(ScaleOutTest, UnlimitedPointTilesRunTheWholeGridsAlgorithm) {
+  Cluster cluster;
+  for (const v1::Algorithm algorithm : {v1::ALGORITHM_UNSPECIFIED, v1::ALGORITHM_BAND}) {
+    v1::QueryRequest request =
+        pointsRequest({{20.5, 30, 40}, {90, 80, 70.25}, {64, 64, 64}}, {128, 128, 128}, 1.0, 0, 0);
+    request.set_algorithm(algorithm);  // unspecified: the separable point EDT; the band: whole-grid windows
+    const Streamed one = stream(cluster.replicas[0]->client(), request, -1.0f);
+    const Streamed many = stream(cluster.coordinator->client(), request, -1.0f);
+    const std::string expected = algorithm == v1::ALGORITHM_BAND ? "band" : "separable";
+    EXPECT_EQ(one.result.header.algorithm(), expected);
+    EXPECT_EQ(many.result.header.algorithm(), expected);
+    const Comparison c = compare(*one.field, *many.field);
+    EXPECT_EQ(c.voxels, 128 * 128 * 128);
+    EXPECT_EQ(c.identical, c.voxels) << expected << ": max diff " << c.max_diff;
+  }
+}
+
 std::vector<uint8_t> blobMask(const Coord& dims);
 
 // Closest-feature ids through the coordinator: the tiles' point indices are mapped back to the request's (the ids

@@ -147,6 +147,20 @@ const RuleCase kRules[] = {
     // enumerations
     {"UnknownStencil", Base::kPointsOnDims, [](auto& r) { r.set_stencil(v1::Stencil(99)); }, kInvalid,
      {"stencil", "99"}},
+    {"UnknownAlgorithm", Base::kPointsOnDims, [](auto& r) { r.set_algorithm(v1::Algorithm(5)); }, kInvalid,
+     {"algorithm", "5"}},
+    {"SeparableWithALimit", Base::kPointsOnDims,
+     [](auto& r) {
+       r.set_algorithm(v1::ALGORITHM_SEPARABLE);
+       r.set_limit(4);
+     },
+     kInvalid, {"algorithm", "separable"}},
+    {"SeparableWithAStencil", Base::kVolume,
+     [](auto& r) {
+       r.set_algorithm(v1::ALGORITHM_SEPARABLE);
+       r.set_stencil(v1::STENCIL_CUBIC26);
+     },
+     kInvalid, {"algorithm", "stencil"}},
     {"UnknownMode", Base::kPointsOnDims, [](auto& r) { r.set_mode(v1::PropagationMode(3)); }, kInvalid, {"mode"}},
     {"UnknownEncoding", Base::kPointsOnDims, [](auto& r) { r.set_encoding(v1::BrickEncoding(3)); }, kInvalid,
      {"encoding"}},

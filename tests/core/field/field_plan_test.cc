@@ -158,6 +158,7 @@ TEST(FieldDefaultsTest, PlannerPicksTheSeparableEdtsOnlyWhereTheyDeliverTheSameF
     SeedKind seeds;  // points: two, on two planes, unless the change says otherwise
     Change change;
     FieldAlgorithm expect;
+    bool separable_applies;  ///< an explicit separable request is honoured (else refused)
   };
   const Change none = [](FieldRequest&) {};
   const Change limit = [](FieldRequest& r) { r.limit_voxels = 5; };
@@ -168,20 +169,21 @@ TEST(FieldDefaultsTest, PlannerPicksTheSeparableEdtsOnlyWhereTheyDeliverTheSameF
   const auto volume = SeedKind::kVolume, points = SeedKind::kPoints;
   const auto separable = FieldAlgorithm::kSeparable, band = FieldAlgorithm::kBand;
   const Case cases[] = {
-      {"volume", volume, none, separable},
-      {"volume, limit", volume, limit, separable},
-      {"volume, stencil", volume, stencil, band},
-      {"volume, paper", volume, paper, band},
-      {"volume, second ring", volume, second_ring, band},
-      {"volume, closest (the propagation's sites)", volume, closest, band},
-      {"two points", points, none, separable},
-      {"two points, closest (carried by the passes)", points, closest, separable},
-      {"two points, limit (the band's work follows it)", points, limit, band},
-      {"two points, stencil", points, stencil, band},
-      {"two points, paper", points, paper, band},
-      {"two points, second ring", points, second_ring, band},
-      {"points, layout unknown", points, [](FieldRequest& r) { r.point_layout.reset(); }, band},
-      {"points on 40 of 64 planes", points, [](FieldRequest& r) { r.point_layout = PointLayout{40, 40, 40}; }, band},
+      {"volume", volume, none, separable, true},
+      {"volume, limit", volume, limit, separable, true},
+      {"volume, stencil", volume, stencil, band, false},
+      {"volume, paper", volume, paper, band, false},
+      {"volume, second ring", volume, second_ring, band, false},
+      {"volume, closest (the propagation's sites)", volume, closest, band, false},
+      {"two points", points, none, separable, true},
+      {"two points, closest (carried by the passes)", points, closest, separable, true},
+      {"two points, limit (the band's work follows it)", points, limit, band, false},
+      {"two points, stencil", points, stencil, band, false},
+      {"two points, paper", points, paper, band, false},
+      {"two points, second ring", points, second_ring, band, false},
+      {"points, layout unknown", points, [](FieldRequest& r) { r.point_layout.reset(); }, band, true},
+      {"points on 40 of 64 planes", points, [](FieldRequest& r) { r.point_layout = PointLayout{40, 40, 40}; }, band,
+       true},
   };
   for (const Case& c : cases) {
     FieldRequest r;
@@ -191,6 +193,18 @@ TEST(FieldDefaultsTest, PlannerPicksTheSeparableEdtsOnlyWhereTheyDeliverTheSameF
     FieldPlan p;
     ASSERT_TRUE(IsOk(planField(r, grid, nullptr, &p))) << c.what;
     EXPECT_EQ(p.algorithm, c.expect) << c.what;
+    // An explicit choice wins where it applies (what a coordinator sends its replicas), and is refused where not.
+    r.algorithm = FieldAlgorithm::kBand;
+    ASSERT_TRUE(IsOk(planField(r, grid, nullptr, &p))) << c.what;
+    EXPECT_EQ(p.algorithm, band) << c.what;
+    r.algorithm = separable;
+    const Status s = planField(r, grid, nullptr, &p);
+    if (c.separable_applies) {
+      EXPECT_TRUE(IsOk(s)) << c.what;
+      EXPECT_EQ(p.algorithm, separable) << c.what;
+    } else {
+      EXPECT_TRUE(IsError(s, Status::Code::kInvalidArgument, "algorithm: separable applies")) << c.what;
+    }
   }
 }
 
