@@ -20,6 +20,9 @@ inline constexpr int kBrickVoxels = kBrickSize * kBrickSize * kBrickSize;
 /// The largest extent the engine accepts along one axis (steps and brick tables are sized for it).
 inline constexpr int kMaxGridDim = 16384;
 
+/// The voxel size of a grid given by its dims (or a seed volume's) without one: the voxel is the unit.
+inline constexpr double kDefaultVoxelSize = 1.0;
+
 /// A box of voxels, [min, min + dims) along each axis (a tile of a grid, or the part of it a tile delivers).
 struct VoxelBox {
   Coord min{};
