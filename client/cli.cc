@@ -20,6 +20,8 @@ extern "C" void onInterruptSignal(int sig) {
   std::signal(sig, SIG_DFL);
 }
 
+}  // namespace
+
 std::vector<CliCommand> registerAllCommands(CLI::App& app, const CliContext& context) {
   std::vector<CliCommand> commands;
   commands.push_back(registerComputeCommand(app, context));
@@ -42,8 +44,6 @@ std::vector<CliCommand> registerAllCommands(CLI::App& app, const CliContext& con
 #endif
   return commands;
 }
-
-}  // namespace
 
 void installInterruptHandler() {
   std::signal(SIGINT, onInterruptSignal);

@@ -16,6 +16,9 @@ namespace distband {
 
 int runDistband(const std::vector<std::string>& args, const CliContext& context);
 
+/// Registers every subcommand this build has on `app` (what runDistband parses with; tests read their options).
+std::vector<CliCommand> registerAllCommands(CLI::App& app, const CliContext& context);
+
 /// Installs a SIGINT/SIGTERM handler that makes interruptRequested() return true (the first signal asks the
 /// engine to stop between steps; the default action is restored, so a second one kills the process).
 void installInterruptHandler();

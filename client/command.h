@@ -2,8 +2,8 @@
 // Contract: a register function (e.g. registerComputeCommand) adds a subcommand and its options to the app and
 // returns the subcommand plus a `run` closure that reads the parsed options. runDistband() (client/cli.h) calls
 // `run` of the subcommand the user chose, after parsing succeeded. Exit codes, shared by every subcommand:
-//   0 success; 1 runtime failure (compute or write failed); 2 usage or input error (bad flags, unreadable or
-//   malformed input files, bad dims); 130 interrupted (SIGINT).
+//   0 success; 1 runtime failure (compute or write failed, or --deadline passed); 2 usage or input error (bad flags,
+//   unreadable or malformed input files, bad dims); 130 interrupted (SIGINT).
 // Commands write results/logs to `out` and diagnostics to `err`; they never call exit().
 #pragma once
 

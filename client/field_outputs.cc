@@ -107,6 +107,37 @@ std::string checkOutputFlags(const OutputFlags& f, double limit_world, OutputPla
   return {};
 }
 
+FieldDescription describeField(const FieldPlan& plan, const Grid& grid, const GridPadding& padding, std::string title,
+                               std::shared_ptr<const std::vector<uint8_t>> inside) {
+  FieldDescription d;
+  d.grid = grid;
+  d.limit_world = plan.limit_world;
+  d.signed_distance = plan.signedField();
+  d.sign_from_band = d.signed_distance && !inside;
+  d.inside = std::move(inside);
+  d.stencil = std::string(stencilName(plan.stencil));
+  d.mode = std::string(modeName(plan.mode));
+  if (d.signed_distance) d.sign = std::string(plan.signName());
+  d.sign_reason = plan.sign_reason;
+  d.padding_voxels = padding.voxels;
+  d.band_clipped = padding.band_clipped;
+  d.segment_length_world = plan.segment_length_world;
+  if (plan.closest_features) d.closest_feature = std::string(plan.closestFeatureName());
+  d.title = std::move(title);
+  return d;
+}
+
+int finishStoppedRun(FieldOutputs& outputs, const RunOutcome& run, RunStop stop, std::string_view command,
+                     const CliContext& ctx) {
+  std::vector<std::string> wrote;
+  const std::string error = outputs.finish(run, &wrote);
+  for (const std::string& line : wrote) ctx.out << line << "\n";
+  ctx.err << "distband " << command << ": "
+          << (stop == RunStop::kDeadline ? "the deadline (--deadline) passed" : "interrupted") << "; "
+          << (error.empty() ? outputs.keptSummary() : error) << "\n";
+  return stop == RunStop::kDeadline ? kExitFailure : kExitInterrupted;
+}
+
 FieldOutputs::FieldOutputs(OutputPlan plan) : plan_(std::move(plan)) {}
 FieldOutputs::~FieldOutputs() = default;
 

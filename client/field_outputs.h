@@ -17,6 +17,9 @@
 //     file was written; the writers' Status codes stay inside, the commands take messages); `lines` gets one
 //     "wrote ..." line per file. When the run is incomplete and no --meta was given, the metadata is
 //     written beside the field anyway (FIELD.json): an incomplete field must not pass for a complete one.
+//   * describeField() says what the files describe from the plan the field was computed by (compute's own, or the
+//     one query rebuilds from its stream's header), so both commands label their files alike; finishStoppedRun()
+//     ends a run stopped by Ctrl-C or --deadline the same way for both (the complete segments kept).
 // Not thread-safe: one caller.
 #pragma once
 
@@ -26,14 +29,13 @@
 #include <vector>
 
 #include "client/brick_sink.h"
+#include "client/command.h"
 #include "core/brick.h"
+#include "core/field/field_plan.h"
 #include "core/grid.h"
+#include "core/mesh/mesh_grid.h"
 #include "core/io/slice_png.h"
 #include "core/status.h"
-
-namespace CLI {
-class App;
-}
 
 namespace distband {
 
@@ -80,6 +82,13 @@ struct FieldDescription {
   std::string title;            ///< leads a slice picture's title (e.g. the input file's name)
 };
 
+/// What the files say about a field computed by `plan` on `grid`: compute's own plan, or the plan query's stream
+/// header describes. `padding`: gridForMesh's (voxels -1 for an explicit lattice). `inside`: a volume's mask where the
+/// command holds it (compute), whose labels then sign the field; without it a signed field takes its signs from the
+/// delivered band. `title` leads a slice's title.
+FieldDescription describeField(const FieldPlan& plan, const Grid& grid, const GridPadding& padding, std::string title,
+                               std::shared_ptr<const std::vector<uint8_t>> inside = nullptr);
+
 struct RunOutcome {
   bool complete = true;  ///< false: interrupted (only the committed segments are written)
   int64_t voxels = 0;
@@ -115,5 +124,14 @@ class FieldOutputs {
   std::unique_ptr<class VdbFieldBuilder> vdb_;
   std::vector<int64_t> closest_;  ///< dense, x fastest
 };
+
+/// How a run ended before its end: the user asked (Ctrl-C) or --deadline passed.
+enum class RunStop { kInterrupted, kDeadline };
+
+/// Ends a run that stopped early, the same way for both commands: writes what finish() keeps (every complete segment,
+/// marked complete=false), lists the files on `out`, says what was kept on `err` ("distband COMMAND: interrupted;
+/// kept the 3 complete segments ..."); returns the exit code (130 interrupted, 1 deadline).
+int finishStoppedRun(FieldOutputs& outputs, const RunOutcome& run, RunStop stop, std::string_view command,
+                     const CliContext& ctx);
 
 }  // namespace distband

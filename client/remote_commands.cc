@@ -1,45 +1,38 @@
 #include "client/remote_commands.h"
 
-#include <atomic>
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <limits>
 #include <memory>
-#include <thread>
+#include <optional>
 
 #include <fmt/format.h>
 
-#include "client/brick_sink.h"
-#include "client/compute_command.h"
+#include "client/field_flags.h"
 #include "client/field_outputs.h"
+#include "client/interrupt_watch.h"
 #include "client/progress.h"
 #include "client/remote_client.h"
 #include "client/remote_connection.h"
-#include "core/io/isosurface.h"
+#include "core/band/band_engine.h"
+#include "core/field/field_plan.h"
 #include "core/io/npy.h"
-#include "core/io/slice_png.h"
-#include "core/io/vdb_writer.h"
+#include "core/seeds/mesh_seeds.h"
+#include "core/stencil.h"
 
 namespace distband {
 namespace {
 
 struct QueryArgs {
   ConnectionArgs connection;
-  std::string mesh, points, volume, asset;
-  int resolution = 0;
-  int padding = -1;  ///< -1: the server's default
-  double voxel_size = 0;
-  std::string dims, origin, box;
-  std::string stencil = "auto", mode = "exact", sign, encoding = "float32", progress = "auto";
-  double segment = 0;
-  double limit = 0;
-  double limit_voxels = 0;
-  double deadline_s = 0;
+  FieldFlags field;  ///< the field flags, shared with compute (client/field_flags.h)
+  std::string encoding = "float32", progress = "auto";
   OutputFlags outputs;
 };
 
-/// The client for a subcommand's connection flags, or "" and a message naming the flag.
+/// The client for a subcommand's connection flags, or null after a message naming the flag.
 std::unique_ptr<RemoteClient> connect(const ConnectionArgs& a, const char* command, const CliContext& ctx) {
   RemoteClientOptions options;
   if (std::string e = makeClientOptions(a, &options); !e.empty()) {
@@ -77,42 +70,51 @@ std::string describe(const grpc::Status& s) {
   }
 }
 
+// distband.v1 names each enum value after its type and then the value's name as core and the flags spell it, both in
+// upper snake case (STENCIL_FCC12 is "fcc12", SIGN_MODE_MASK_INSIDE "mask-inside", BRICK_ENCODING_FLOAT16
+// "float16"): that one rule maps the protocol's values to names, so the client keeps no table of either.
 template <typename Enum>
-using NameTable = std::initializer_list<std::pair<const char*, Enum>>;
-
-template <typename Enum>
-bool pick(const std::string& text, NameTable<Enum> table, Enum* out) {
-  for (const auto& [name, value] : table)
-    if (text == name) {
-      *out = value;
-      return true;
-    }
-  return false;
-}
-
-/// The flag's name of a value the header reports (the first name in the table that maps to it).
-template <typename Enum>
-std::string nameOf(Enum value, NameTable<Enum> table) {
-  for (const auto& [name, v] : table)
-    if (v == value) return name;
-  return "?";
-}
-
-// The names --stencil and --sign take, read both ways (flag -> request, header -> what the CLI prints).
-const NameTable<v1::Stencil> kStencilNames = {{"auto", v1::STENCIL_UNSPECIFIED}, {"cubic6", v1::STENCIL_CUBIC6},
-                                              {"cubic18", v1::STENCIL_CUBIC18}, {"cubic26", v1::STENCIL_CUBIC26},
-                                              {"fcc12", v1::STENCIL_FCC12}};
-const NameTable<v1::SignMode> kSignNames = {
-    {"auto", v1::SIGN_MODE_AUTO},       {"unsigned", v1::SIGN_MODE_UNSIGNED}, {"pseudonormal", v1::SIGN_MODE_PSEUDONORMAL},
-    {"winding", v1::SIGN_MODE_WINDING}, {"parity", v1::SIGN_MODE_PARITY},     {"mask-inside", v1::SIGN_MODE_MASK_INSIDE}};
-
-std::string closestText(v1::ClosestFeature closest) {
-  switch (closest) {
-    case v1::CLOSEST_FEATURE_TRIANGLE: return "triangle";
-    case v1::CLOSEST_FEATURE_POINT: return "point";
-    case v1::CLOSEST_FEATURE_VOXEL: return "voxel";
-    default: return "";
+std::string valuePrefix() {
+  std::string prefix;
+  for (char c : google::protobuf::GetEnumDescriptor<Enum>()->name()) {
+    if (std::isupper(static_cast<unsigned char>(c)) && !prefix.empty()) prefix += '_';
+    prefix += char(std::toupper(static_cast<unsigned char>(c)));
   }
+  return prefix + "_";
+}
+
+/// The protocol's value of a name; false for an unknown name (or the UNSPECIFIED value, which names nothing).
+template <typename Enum>
+bool protoValue(std::string_view name, Enum* out) {
+  std::string full = valuePrefix<Enum>();
+  for (char c : name) full += c == '-' ? '_' : char(std::toupper(static_cast<unsigned char>(c)));
+  const auto* value = google::protobuf::GetEnumDescriptor<Enum>()->FindValueByName(full);
+  if (!value || value->number() == 0) return false;
+  *out = Enum(value->number());
+  return true;
+}
+
+/// The name of a protocol value ("" for UNSPECIFIED or an unknown number).
+template <typename Enum>
+std::string valueName(Enum value) {
+  const auto* v = google::protobuf::GetEnumDescriptor<Enum>()->FindValueByNumber(int(value));
+  if (!v || v->number() == 0) return {};
+  std::string name(v->name());
+  name.erase(0, valuePrefix<Enum>().size());
+  for (char& c : name) c = c == '_' ? '-' : char(std::tolower(static_cast<unsigned char>(c)));
+  return name;
+}
+
+/// Every named value of a protocol enum, "a or b".
+template <typename Enum>
+std::string valueNames() {
+  const auto* descriptor = google::protobuf::GetEnumDescriptor<Enum>();
+  std::string names;
+  for (int i = 0; i < descriptor->value_count(); ++i) {
+    const std::string name = valueName(Enum(descriptor->value(i)->number()));
+    if (!name.empty()) names += (names.empty() ? "" : i + 1 == descriptor->value_count() ? " or " : ", ") + name;
+  }
+  return names;
 }
 
 void setVec(v1::Vec3* v, const Vec3d& p) {
@@ -121,244 +123,248 @@ void setVec(v1::Vec3* v, const Vec3d& p) {
   v->set_z(p.z);
 }
 
-/// Builds the request (and uploads a mesh/volume first). Returns "" or a usage message; *status on RPC errors.
-std::string buildRequest(const QueryArgs& a, RemoteClient& client, const CliContext& ctx, v1::QueryRequest* r,
-                         grpc::Status* status) {
-  const int sources = int(!a.mesh.empty()) + int(!a.points.empty()) + int(!a.volume.empty()) + int(!a.asset.empty());
-  if (sources != 1) return "give exactly one seed source: --mesh, --points, --volume or --asset";
-  if (!a.mesh.empty()) {
-    v1::UploadReply up;
-    *status = client.uploadMeshFile(a.mesh, &up);
-    if (!status->ok()) return {};
-    ctx.out << fmt::format("uploaded {}: {} ({} triangles{})\n", a.mesh, up.asset_id(), up.mesh().triangles(),
-                           up.already_cached() ? ", already cached" : "");
-    r->set_asset_id(up.asset_id());
-  } else if (!a.volume.empty()) {
-    std::vector<uint8_t> mask;
-    Coord dims;
-    if (Status s = readNpyMask(a.volume, &mask, &dims); !s.ok()) return s.message();
-    v1::UploadReply up;
-    *status = client.uploadVolume(dims, mask, a.volume, &up);
-    if (!status->ok()) return {};
-    ctx.out << fmt::format("uploaded {}: {}\n", a.volume, up.asset_id());
-    r->set_asset_id(up.asset_id());
-  } else if (!a.points.empty()) {
-    std::vector<Vec3d> pts;
-    if (std::string e = parsePointList(a.points, &pts); !e.empty()) return e;
-    for (const Vec3d& p : pts) setVec(r->mutable_points()->add_points(), p);
-  } else {
-    r->set_asset_id(a.asset);
-  }
-  v1::GridSpec* g = r->mutable_grid();
-  if (a.voxel_size != 0) g->set_voxel_size(a.voxel_size);
-  if (a.resolution != 0) g->set_resolution(uint32_t(std::max(0, a.resolution)));
-  if (a.padding >= 0) g->set_padding(uint32_t(a.padding));
-  if (!a.dims.empty()) {
-    Coord d;
-    if (std::string e = parseDims(a.dims, &d); !e.empty()) return e;
-    g->mutable_dims()->set_x(uint32_t(d.x));
-    g->mutable_dims()->set_y(uint32_t(d.y));
-    g->mutable_dims()->set_z(uint32_t(d.z));
-  }
-  if (!a.origin.empty()) {
-    Vec3d o;
-    if (std::string e = parseVec3(a.origin, "--origin", &o); !e.empty()) return e;
-    setVec(g->mutable_origin(), o);
-  }
-  if (!a.box.empty()) {
-    const size_t comma = [&] {
-      size_t n = 0, i = 0;
-      for (; i < a.box.size(); ++i)
-        if (a.box[i] == ',' && ++n == 3) break;
-      return i;
-    }();
-    if (comma >= a.box.size()) return "--box: expected six comma-separated numbers x0,y0,z0,x1,y1,z1";
-    Vec3d lo, hi;
-    if (std::string e = parseVec3(a.box.substr(0, comma), "--box (min)", &lo); !e.empty()) return e;
-    if (std::string e = parseVec3(a.box.substr(comma + 1), "--box (max)", &hi); !e.empty()) return e;
-    setVec(g->mutable_box()->mutable_min(), lo);
-    setVec(g->mutable_box()->mutable_max(), hi);
-  }
-  v1::Stencil stencil;
-  if (!pick(a.stencil, kStencilNames, &stencil))
-    return fmt::format("--stencil '{}': expected auto, cubic6, cubic18, cubic26 or fcc12", a.stencil);
-  r->set_stencil(stencil);
-  v1::PropagationMode mode;
-  if (!pick(a.mode, {{"exact", v1::PROPAGATION_MODE_EXACT}, {"exact-feature", v1::PROPAGATION_MODE_EXACT},
-                     {"paper", v1::PROPAGATION_MODE_PAPER}}, &mode))
-    return fmt::format("--mode '{}': expected exact (exact-feature) or paper", a.mode);
-  r->set_mode(mode);
-  if (!a.sign.empty()) {
-    v1::SignMode sign;
-    if (!pick(a.sign, kSignNames, &sign))
-      return fmt::format("--sign '{}': expected auto, pseudonormal, winding, parity, unsigned or mask-inside", a.sign);
-    r->set_sign(sign);
-  }
-  v1::BrickEncoding enc;
-  if (!pick(a.encoding, {{"float32", v1::BRICK_ENCODING_FLOAT32}, {"float16", v1::BRICK_ENCODING_FLOAT16}}, &enc))
-    return fmt::format("--encoding '{}': expected float32 or float16", a.encoding);
-  r->set_encoding(enc);
-  r->set_segment_length(a.segment);
-  r->set_limit(a.limit);
-  r->set_limit_voxels(a.limit_voxels);
-  r->set_closest_feature(!a.outputs.closest.empty());
+/// The flags, checked: what to compute, how to receive it and where to write it.
+struct QuerySetup {
+  FieldSpec spec;
+  OutputPlan outputs;
+  ProgressMode progress = ProgressMode::kAuto;
+  v1::BrickEncoding encoding = v1::BRICK_ENCODING_UNSPECIFIED;
+};
+
+/// Step 1: every flag and output path, before any network traffic.
+std::string checkQueryFlags(const QueryArgs& a, QuerySetup* q) {
+  if (std::string e = parseFieldFlags(a.field, &q->spec); !e.empty()) return e;
+  FieldSpec& spec = q->spec;
+  if (spec.request.second_ring)
+    return "--second-ring: the service's QueryRequest has no field for the second-ring correction (distband compute "
+           "--second-ring runs it)";
+  spec.request.closest_features = !a.outputs.closest.empty();
+  if (std::string e = checkOutputFlags(a.outputs, spec.outputLimit(), &q->outputs); !e.empty()) return e;
+  std::error_code ec;
+  if (!spec.asset && !spec.source.empty() && !std::filesystem::is_regular_file(spec.source, ec))
+    return fmt::format("{} {}: no such file", spec.seeds == SeedKind::kMesh ? "--mesh" : "--volume", spec.source);
+  if (!spec.asset && spec.seeds == SeedKind::kMesh && meshFormatFromPath(spec.source) == v1::MESH_FORMAT_UNSPECIFIED)
+    return fmt::format("--mesh {}: unsupported mesh format (expected .obj, .off, .ply or .stl)", spec.source);
+  if (!protoValue(a.encoding, &q->encoding))
+    return fmt::format("--encoding '{}': expected {}", a.encoding, valueNames<v1::BrickEncoding>());
+  const std::pair<const char*, ProgressMode> modes[] = {{"auto", ProgressMode::kAuto},
+                                                        {"plain", ProgressMode::kPlain},
+                                                        {"terminal", ProgressMode::kTerminal},
+                                                        {"quiet", ProgressMode::kQuiet}};
+  const auto* mode =
+      std::find_if(std::begin(modes), std::end(modes), [&](const auto& m) { return a.progress == m.first; });
+  if (mode == std::end(modes))
+    return fmt::format("--progress '{}': expected auto, plain, terminal or quiet", a.progress);
+  q->progress = mode->second;
   return {};
 }
 
-int runQuery(const QueryArgs& a, const CliContext& ctx) {
-  auto usage = [&](const std::string& msg) {
-    ctx.err << "distband query: " << msg << "\n";
-    return kExitUsage;
-  };
-  // Validate every flag and output path before any network traffic, naming the flag.
-  if (a.limit_voxels != 0 && !(a.limit_voxels > 0 && std::isfinite(a.limit_voxels)))
-    return usage(fmt::format("--limit-voxels must be finite and > 0 (got {})", a.limit_voxels));
-  OutputPlan plan;
-  const double limit_world = a.limit_voxels > 0 ? std::numeric_limits<double>::quiet_NaN()
-                             : a.limit > 0      ? a.limit
-                                                : std::numeric_limits<double>::infinity();
-  if (std::string e = checkOutputFlags(a.outputs, limit_world, &plan); !e.empty()) return usage(e);
-  if (!a.mesh.empty()) {  // the upload reads it only after connecting: check it is there now
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(a.mesh, ec))
-      return usage(fmt::format("--mesh {}: no such file", a.mesh));
-    if (meshFormatFromPath(a.mesh) == v1::MESH_FORMAT_UNSPECIFIED)
-      return usage(fmt::format("--mesh {}: unsupported mesh format (expected .obj, .off, .ply or .stl)", a.mesh));
+/// Step 2: uploads a mesh or volume (the request names it by its id) or names the asset. Returns "" or a usage
+/// message; *status on RPC errors.
+std::string uploadSeeds(const FieldSpec& spec, RemoteClient& client, const CliContext& ctx, v1::QueryRequest* r,
+                        grpc::Status* status) {
+  if (spec.seeds == SeedKind::kPoints) return {};
+  if (spec.asset) {
+    r->set_asset_id(spec.source);
+    return {};
   }
-  if (!a.volume.empty()) {
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(a.volume, ec)) return usage(fmt::format("--volume {}: no such file", a.volume));
+  v1::UploadReply up;
+  if (spec.seeds == SeedKind::kMesh) {
+    *status = client.uploadMeshFile(spec.source, &up);
+    if (!status->ok()) return {};
+    ctx.out << fmt::format("uploaded {}: {} ({} triangles{})\n", spec.source, up.asset_id(), up.mesh().triangles(),
+                           up.already_cached() ? ", already cached" : "");
+  } else {
+    std::vector<uint8_t> mask;
+    Coord dims;
+    if (Status s = readNpyMask(spec.source, &mask, &dims); !s.ok()) return s.message();
+    if (std::string e = checkMaskDims(spec, dims); !e.empty()) return e;
+    *status = client.uploadVolume(dims, mask, spec.source, &up);
+    if (!status->ok()) return {};
+    ctx.out << fmt::format("uploaded {}: {}\n", spec.source, up.asset_id());
   }
-  ProgressMode pmode;
-  if (!pick(a.progress, {{"auto", ProgressMode::kAuto}, {"plain", ProgressMode::kPlain},
-                         {"quiet", ProgressMode::kQuiet}, {"terminal", ProgressMode::kTerminal}}, &pmode))
-    return usage(fmt::format("--progress '{}': expected auto, plain, terminal or quiet", a.progress));
+  r->set_asset_id(up.asset_id());
+  return {};
+}
 
-  std::unique_ptr<RemoteClient> connection = connect(a.connection, "query", ctx);
-  if (!connection) return kExitUsage;
-  RemoteClient& client = *connection;
-  v1::QueryRequest request;
-  grpc::Status status;
-  if (std::string e = buildRequest(a, client, ctx, &request, &status); !e.empty()) return usage(e);
-  if (!status.ok()) {
-    ctx.err << "distband query: upload failed: " << describe(status) << "\n";
-    return exitCodeOf(status);
+/// Step 3: the request's points, grid and field, as the spec asks (what it leaves unset stays unset: the server's
+/// planner decides it, as compute's does).
+std::string fillRequest(const QuerySetup& q, v1::QueryRequest* r) {
+  const FieldSpec& spec = q.spec;
+  for (const Vec3d& p : spec.points) setVec(r->mutable_points()->add_points(), p);
+  const GridChoice& c = spec.grid;
+  v1::GridSpec* g = r->mutable_grid();
+  if (c.voxel_size > 0) g->set_voxel_size(c.voxel_size);
+  if (c.resolution > 0) g->set_resolution(uint32_t(c.resolution));
+  if (c.padding) g->set_padding(uint32_t(*c.padding));
+  if (c.dims) {
+    g->mutable_dims()->set_x(uint32_t(c.dims->x));
+    g->mutable_dims()->set_y(uint32_t(c.dims->y));
+    g->mutable_dims()->set_z(uint32_t(c.dims->z));
+  }
+  if (c.lattice) setVec(g->mutable_origin(), c.origin);
+  if (c.box_min) {
+    setVec(g->mutable_box()->mutable_min(), *c.box_min);
+    setVec(g->mutable_box()->mutable_max(), *c.box_max);
+  }
+  const FieldRequest& f = spec.request;
+  v1::Stencil stencil = v1::STENCIL_UNSPECIFIED;
+  v1::PropagationMode mode = v1::PROPAGATION_MODE_UNSPECIFIED;
+  v1::SignMode sign = v1::SIGN_MODE_UNSPECIFIED;
+  const std::string_view sign_name = f.inside_negative ? kMaskInsideSign
+                                     : f.mesh_sign     ? signMethodName(*f.mesh_sign)
+                                                       : std::string_view();
+  if ((f.stencil && !protoValue(stencilName(*f.stencil), &stencil)) ||
+      (f.mode && !protoValue(modeName(*f.mode), &mode)) || (!sign_name.empty() && !protoValue(sign_name, &sign)))
+    return "the protocol has no value for a choice the flags made (the service's enums and core's names disagree)";
+  if (f.algorithm)
+    r->set_algorithm(*f.algorithm == FieldAlgorithm::kSeparable ? v1::ALGORITHM_SEPARABLE : v1::ALGORITHM_BAND);
+  r->set_stencil(stencil);
+  r->set_mode(mode);
+  r->set_sign(sign);
+  r->set_encoding(q.encoding);
+  r->set_segment_length(f.segment_length_world);
+  r->set_limit(std::isfinite(f.limit_world) ? f.limit_world : 0);  // 0: none
+  r->set_limit_voxels(f.limit_voxels);
+  r->set_closest_feature(f.closest_features);
+  return {};
+}
+
+/// The plan a stream's header describes (the server's planner made it), rebuilt with core's names of its values.
+/// Returns "" or what in the header core does not know.
+std::string planOfHeader(const v1::QueryHeader& h, SeedKind seeds, FieldPlan* plan) {
+  FieldPlan p;
+  p.seeds = seeds;
+  const std::optional<FieldAlgorithm> algorithm = parseAlgorithm(h.algorithm());
+  const std::optional<StencilKind> stencil = parseStencil(valueName(h.stencil()));
+  FieldRequest sign;
+  sign.seeds = seeds;
+  if (!algorithm) return fmt::format("algorithm '{}'", h.algorithm());
+  if (!stencil) return fmt::format("stencil {}", int(h.stencil()));
+  if (!parseMode(valueName(h.mode()), &p.mode)) return fmt::format("mode {}", int(h.mode()));
+  if (!requestSign(valueName(h.sign()), &sign).ok()) return fmt::format("sign {}", int(h.sign()));
+  p.algorithm = *algorithm;
+  p.stencil = *stencil;
+  p.mesh_sign = sign.mesh_sign.value_or(SignMethod::kUnsigned);
+  p.inside_negative = sign.inside_negative;
+  p.sign_reason = h.sign_reason();
+  p.limit_world = h.limit();
+  p.segment_length_world = h.segment_length();
+  p.closest_features = h.closest_feature() != v1::CLOSEST_FEATURE_NONE;
+  *plan = std::move(p);
+  return {};
+}
+
+/// Steps 4 and 5: what arrives on the stream: the header opens the outputs and the progress display, bricks fill
+/// them, each segment's marker commits it.
+class QueryReceiver {
+ public:
+  QueryReceiver(const QuerySetup& q, const QueryArgs& a, const CliContext& ctx)
+      : outputs(q.outputs),
+        spec_(q.spec),
+        progress_mode_(q.progress),
+        limit_voxels_flag_(a.field.limit_voxels),
+        ctx_(ctx) {}
+
+  RemoteQueryCallbacks callbacks() {
+    RemoteQueryCallbacks cb;
+    cb.on_header = [this](const Grid& grid, const v1::QueryHeader& h) { return onHeader(grid, h); };
+    cb.on_bricks = [this](SegmentBricks&& batch, uint64_t bytes) {
+      segment_bytes_ += bytes;
+      int64_t voxels = 0;
+      for (const Brick& b : batch.bricks) voxels += b.mask.count();
+      progress->onData(int64_t(batch.bricks.size()), voxels, bytes);
+      outputs.add(std::move(batch));
+      return true;
+    };
+    cb.on_segment_done = [this](const v1::SegmentDone& d) {
+      outputs.commitSegment(d.upper());
+      committed_voxels += int64_t(d.voxels());
+      SegmentProgress sp;
+      sp.index = int(d.segment());
+      sp.lower_world = d.lower();
+      sp.upper_world = d.upper();
+      sp.bricks = int64_t(d.bricks());
+      sp.voxels = int64_t(d.voxels());
+      sp.bytes = segment_bytes_;
+      segment_bytes_ = 0;
+      sp.last = d.last();
+      progress->onSegment(sp);
+      return true;
+    };
+    return cb;
   }
 
-  FieldOutputs outputs(plan);
+  FieldOutputs outputs;
   std::unique_ptr<ProgressDisplay> progress;
-  std::string setup_error;
-  RemoteQueryCallbacks cb;
-  cb.on_header = [&](const Grid& grid, const v1::QueryHeader& h) {
-    ctx.out << fmt::format("query {}: grid {}x{}x{}, voxel size {:g}, origin ({:g}, {:g}, {:g}), limit {:g}, {}\n",
-                           h.query_id(), grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
-                           grid.origin().x, grid.origin().y, grid.origin().z, h.limit(),
-                           h.signed_() ? "signed" : "unsigned");
-    if (h.algorithm() == "separable")
-      ctx.out << "algorithm: separable (a seed volume over the whole grid: an exact separable EDT; the first segment "
-                 "arrives once the whole field is known)\n";
-    const std::string sign = nameOf(h.sign(), kSignNames);
-    if (h.sign() != v1::SIGN_MODE_UNSIGNED || h.sign_reason().rfind("auto", 0) == 0)
-      ctx.out << fmt::format("sign: {} ({})\n", sign, h.sign_reason());
-    if (h.band_clipped())
-      ctx.err << "distband query: " << clippedBandWarning(int(h.padding()), h.limit() / grid.voxelSize(), a.padding >= 0)
-              << "\n";
-    FieldDescription field;
-    field.grid = grid;
-    field.limit_world = h.limit();
-    field.signed_distance = h.signed_();
-    field.sign_from_band = h.signed_();  // no inside labels on the client: signs come from the delivered band
-    field.stencil = nameOf(h.stencil(), kStencilNames);
-    field.mode = h.mode() == v1::PROPAGATION_MODE_PAPER ? "paper" : "exact";
-    if (h.signed_()) field.sign = sign;
-    field.sign_reason = h.sign_reason();
-    field.padding_voxels = a.dims.empty() ? int(h.padding()) : -1;
-    field.band_clipped = h.band_clipped();
-    field.segment_length_world = h.segment_length();
-    field.closest_feature = closestText(h.closest_feature());
+  std::string setup_error;       ///< why on_header stopped the stream
+  int setup_code = kExitOk;      ///< and its exit code
+  int64_t committed_voxels = 0;  ///< voxels of the complete segments (what an interrupted query keeps)
+
+ private:
+  bool onHeader(const Grid& grid, const v1::QueryHeader& h) {
+    ctx_.out << fmt::format("query {}: grid {}x{}x{}, voxel size {:g}, origin ({:g}, {:g}, {:g}), limit {:g}, {}\n",
+                            h.query_id(), grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
+                            grid.origin().x, grid.origin().y, grid.origin().z, h.limit(),
+                            h.signed_() ? "signed" : "unsigned");
+    FieldPlan plan;
+    if (std::string e = planOfHeader(h, spec_.seeds, &plan); !e.empty()) {
+      setup_error = "the server's header names a value this client does not know: " + e;
+      setup_code = kExitFailure;
+      return false;
+    }
+    ctx_.out << algorithmLine(plan) << "\n";
+    if (plan.signedField() || h.sign_reason().rfind("auto", 0) == 0)
+      ctx_.out << fmt::format("sign: {} ({})\n", plan.signName(), plan.sign_reason);
+    const GridPadding padding{spec_.grid.lattice ? -1 : int(h.padding()), h.band_clipped()};
+    if (padding.band_clipped)
+      ctx_.err << "distband query: "
+               << clippedBandWarning(padding.voxels, plan.limitVoxels(grid), spec_.grid.padding.has_value()) << "\n";
     // The input file's name leads a slice's title (none for point lists and stored assets).
-    field.title = std::filesystem::path(!a.mesh.empty() ? a.mesh : a.volume).filename().string();
-    if (std::string e = outputs.open(field); !e.empty()) {
-      setup_error = a.limit_voxels > 0 && e.rfind("--isosurface", 0) == 0
-                        ? fmt::format("{} (--limit-voxels {:g})", e, a.limit_voxels)
+    const std::string title = spec_.asset ? "" : std::filesystem::path(spec_.source).filename().string();
+    if (std::string e = outputs.open(describeField(plan, grid, padding, title)); !e.empty()) {
+      setup_error = limit_voxels_flag_ && e.rfind("--isosurface", 0) == 0
+                        ? fmt::format("{} (--limit-voxels {:g})", e, *limit_voxels_flag_)
                         : e;
+      setup_code = kExitUsage;
       return false;
     }
     ProgressOptions po;
-    po.mode = pmode;
+    po.mode = progress_mode_;
     po.limit_world = h.limit();
     po.segment_length_world = h.segment_length();
     po.expected_voxels = int64_t(h.expected_voxels());
     progress = std::make_unique<ProgressDisplay>(po);
     return true;
-  };
-  uint64_t segment_bytes = 0;
-  int64_t committed_voxels = 0;
-  cb.on_bricks = [&](SegmentBricks&& batch, uint64_t bytes) {
-    segment_bytes += bytes;
-    int64_t voxels = 0;
-    for (const Brick& b : batch.bricks) voxels += b.mask.count();
-    progress->onData(int64_t(batch.bricks.size()), voxels, bytes);
-    outputs.add(std::move(batch));
-    return true;
-  };
-  cb.on_segment_done = [&](const v1::SegmentDone& d) {
-    outputs.commitSegment(d.upper());
-    committed_voxels += int64_t(d.voxels());
-    SegmentProgress sp;
-    sp.index = int(d.segment());
-    sp.lower_world = d.lower();
-    sp.upper_world = d.upper();
-    sp.bricks = int64_t(d.bricks());
-    sp.voxels = int64_t(d.voxels());
-    sp.bytes = segment_bytes;
-    segment_bytes = 0;
-    sp.last = d.last();
-    progress->onSegment(sp);
-    return true;
-  };
+  }
 
-  // SIGINT/SIGTERM: cancel the query on the server (the engine stops) and write nothing.
-  QueryCanceller canceller;
-  std::atomic<bool> done{false};
-  std::thread watcher([&] {
-    while (!done.load()) {
-      if (ctx.interrupted && ctx.interrupted()) {
-        canceller.cancel();
-        return;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-  });
-  RemoteQueryOptions qo;
-  qo.canceller = &canceller;
-  qo.deadline = std::chrono::milliseconds(int64_t(a.deadline_s * 1000));
-  const RemoteQueryResult result = client.query(request, cb, qo);
-  done = true;
-  watcher.join();
+  const FieldSpec& spec_;
+  ProgressMode progress_mode_;
+  std::optional<double> limit_voxels_flag_;
+  const CliContext& ctx_;
+  uint64_t segment_bytes_ = 0;
+};
 
-  if (!setup_error.empty()) {
-    if (progress) progress->finish(false, setup_error);
-    return usage(setup_error);
+/// Step 6: the files and the summary, or how the stream ended early.
+int finishQuery(const RemoteQueryResult& result, QueryReceiver& rx, const InterruptWatch& watch,
+                const QueryCanceller& canceller, const CliContext& ctx) {
+  if (!rx.setup_error.empty()) {
+    if (rx.progress) rx.progress->finish(false, rx.setup_error);
+    ctx.err << "distband query: " << rx.setup_error << "\n";
+    return rx.setup_code;
   }
   if (!result.status.ok()) {
-    if (progress) progress->finish(false, describe(result.status));
-    if (canceller.cancelled()) {
-      // Ctrl-C: the server stopped; keep every complete segment received (marked incomplete), drop the rest.
-      RunOutcome run;
-      run.complete = false;
-      run.voxels = committed_voxels;
-      run.seconds = result.total_seconds;
-      std::vector<std::string> wrote;
-      const std::string e = result.have_header ? outputs.finish(run, &wrote) : "nothing arrived: nothing written";
-      for (const std::string& line : wrote) ctx.out << line << "\n";
-      ctx.err << "distband query: interrupted; " << (e.empty() ? outputs.keptSummary() : e) << "\n";
-      return kExitInterrupted;
+    if (rx.progress) rx.progress->finish(false, describe(result.status));
+    const bool deadline = watch.deadlinePassed() || result.status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
+    if (deadline || canceller.cancelled()) {
+      // The server stopped; keep every complete segment received (marked incomplete), drop the rest.
+      RunOutcome run{false, rx.committed_voxels, result.total_seconds};
+      return finishStoppedRun(rx.outputs, run, deadline ? RunStop::kDeadline : RunStop::kInterrupted, "query", ctx);
     }
     ctx.err << "distband query: " << describe(result.status) << "\n";
     return result.status.error_code() == grpc::StatusCode::CANCELLED ? kExitFailure : exitCodeOf(result.status);
   }
-  progress->finish(true);
+  rx.progress->finish(true);
   const v1::QuerySummary& s = result.summary;
   ctx.out << "segment  range                 voxels      bricks   compute_s  sent_at_s\n";
   for (const v1::SegmentTiming& t : s.segments())
@@ -370,11 +376,9 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
       "client: first bricks after {:.3f}s, done after {:.3f}s\n",
       s.voxels(), s.bricks(), result.messages, result.wire_bytes / 1e6, s.seed_seconds(), s.compute_seconds(),
       s.total_seconds(), result.first_bricks_seconds, result.total_seconds);
-  RunOutcome run;
-  run.voxels = int64_t(s.voxels());
-  run.seconds = s.total_seconds();
+  RunOutcome run{true, int64_t(s.voxels()), s.total_seconds()};
   std::vector<std::string> wrote;
-  const std::string e = outputs.finish(run, &wrote);
+  const std::string e = rx.outputs.finish(run, &wrote);
   for (const std::string& line : wrote) ctx.out << line << "\n";
   if (!e.empty()) {
     ctx.err << "distband query: " << e << "\n";
@@ -383,35 +387,49 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
   return kExitOk;
 }
 
+int runQuery(const QueryArgs& a, const CliContext& ctx) {
+  const auto t_start = std::chrono::steady_clock::now();
+  auto usage = [&](const std::string& msg) {
+    ctx.err << "distband query: " << msg << "\n";
+    return kExitUsage;
+  };
+  QuerySetup q;
+  if (std::string e = checkQueryFlags(a, &q); !e.empty()) return usage(e);
+  const std::unique_ptr<RemoteClient> connection = connect(a.connection, "query", ctx);
+  if (!connection) return kExitUsage;
+  // Ctrl-C and --deadline trip the watch, which cancels the query on the server (its engine stops).
+  QueryCanceller canceller;
+  const auto deadline = q.spec.deadline(t_start);
+  InterruptWatch watch(ctx.interrupted, deadline, [&canceller] { canceller.cancel(); });
+
+  v1::QueryRequest request;
+  grpc::Status status;
+  if (std::string e = uploadSeeds(q.spec, *connection, ctx, &request, &status); !e.empty()) return usage(e);
+  if (!status.ok()) {
+    ctx.err << "distband query: upload failed: " << describe(status) << "\n";
+    return exitCodeOf(status);
+  }
+  if (std::string e = fillRequest(q, &request); !e.empty()) {
+    ctx.err << "distband query: " << e << "\n";
+    return kExitFailure;
+  }
+  QueryReceiver receiver(q, a, ctx);
+  RemoteQueryOptions qo;
+  qo.canceller = &canceller;
+  if (deadline)  // the server stops at the same time, whether or not the client is still there to cancel
+    qo.deadline = std::max(std::chrono::milliseconds(1),
+                           std::chrono::ceil<std::chrono::milliseconds>(*deadline - std::chrono::steady_clock::now()));
+  const RemoteQueryResult result = connection->query(request, receiver.callbacks(), qo);
+  return finishQuery(result, receiver, watch, canceller, ctx);
+}
+
 CliCommand registerQuery(CLI::App& app, const CliContext& ctx) {
   auto args = std::make_shared<QueryArgs>();
   CLI::App* cmd = app.add_subcommand(kRemoteCommands[0].name, kRemoteCommands[0].description);
+  addFieldFlags(cmd, &args->field, AssetSeeds::kYes);
   addConnectionFlags(cmd, &args->connection);
-  cmd->add_option("--mesh", args->mesh, "Seed mesh (.obj .off .ply .stl), uploaded first");
-  cmd->add_option("--points", args->points, "Seed points in world coordinates: \"x,y,z;x,y,z\"");
-  cmd->add_option("--volume", args->volume, "Seed mask .npy (uint8/bool, shape (Z, Y, X)), uploaded first");
-  cmd->add_option("--asset", args->asset, "A previously uploaded asset id");
-  cmd->add_option("--resolution", args->resolution, "Voxels along the longest side (the paper's N^3)");
-  cmd->add_option("--padding", args->padding,
-                  "Margin around the seeds' bounds, voxels (default: at least 3 and at least the limit)");
-  cmd->add_option("--voxel-size", args->voxel_size, "Voxel size in world units");
-  cmd->add_option("--dims", args->dims, "Explicit grid dims X,Y,Z (with --voxel-size; volumes: the mask's)");
-  cmd->add_option("--origin", args->origin, "World position of voxel (0,0,0) with --dims: x,y,z");
-  cmd->add_option("--box", args->box, "Explicit world box x0,y0,z0,x1,y1,z1");
-  cmd->add_option("--stencil", args->stencil,
-                  "auto (the server's default: fcc12 for meshes in exact mode, else cubic26) | cubic26 | cubic18 | "
-                  "cubic6 | fcc12")
+  cmd->add_option("--encoding", args->encoding, "Brick values on the wire: " + valueNames<v1::BrickEncoding>())
       ->capture_default_str();
-  cmd->add_option("--mode", args->mode, "exact (exact-feature for meshes) | paper")->capture_default_str();
-  cmd->add_option("--sign", args->sign,
-                  "auto (default: pseudonormal for closed meshes, winding for open ones) | pseudonormal | winding | "
-                  "parity | unsigned (meshes); unsigned (default) | mask-inside (volumes)");
-  cmd->add_option("--segment", args->segment, "Segment length in world units (0: one segment)");
-  CLI::Option* limit = cmd->add_option("--limit", args->limit, "Distance limit in world units (0: none)");
-  cmd->add_option("--limit-voxels", args->limit_voxels, "Distance limit in voxels of the grid (instead of --limit)")
-      ->excludes(limit);
-  cmd->add_option("--encoding", args->encoding, "float32 | float16")->capture_default_str();
-  cmd->add_option("--deadline", args->deadline_s, "Give up after this many seconds (0: never)");
   cmd->add_option("--progress", args->progress, "auto | plain | terminal | quiet")->capture_default_str();
   addOutputFlags(cmd, &args->outputs);
   return {cmd, [args, &ctx] { return runQuery(*args, ctx); }};

@@ -21,6 +21,9 @@ inline constexpr int kBrickVoxels = kBrickSize * kBrickSize * kBrickSize;
 /// The largest extent the engine accepts along one axis (steps and brick tables are sized for it).
 inline constexpr int kMaxGridDim = 16384;
 
+/// The voxel size of a grid given by its dims (or a seed volume's) without one: the voxel is the unit.
+inline constexpr double kDefaultVoxelSize = 1.0;
+
 /// A box of voxels, [min, min + dims) along each axis (a tile of a grid, or the part of it a tile delivers).
 /// A distance limit as a request gives it: in voxels of the grid when voxels > 0, else in world units (+infinity:
 /// none). The grid (its padding holds the limit) and the plan read the same one.

@@ -51,7 +51,7 @@ std::string_view stencilName(StencilKind kind) {
 }
 
 std::optional<StencilKind> parseStencil(std::string_view name) {
-  for (StencilKind k : {StencilKind::kCubic6, StencilKind::kCubic18, StencilKind::kCubic26, StencilKind::kFcc12})
+  for (StencilKind k : kStencilKinds)
     if (stencilName(k) == name) return k;
   return std::nullopt;
 }

@@ -17,6 +17,9 @@
 namespace distband {
 
 enum class StencilKind { kCubic6, kCubic18, kCubic26, kFcc12 };
+/// Every stencil, in the order names are listed to users.
+inline constexpr StencilKind kStencilKinds[] = {StencilKind::kCubic26, StencilKind::kCubic18, StencilKind::kCubic6,
+                                                StencilKind::kFcc12};
 
 struct Stencil {
   StencilKind kind;

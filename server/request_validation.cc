@@ -106,7 +106,7 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, con
     double h = g.voxel_size();
     if (h == 0) {
       if (!volume) return invalid("grid.voxel_size must be set (> 0) when grid.dims is given");
-      h = 1;
+      h = kDefaultVoxelSize;
     }
     *grid = Grid(g.has_origin() ? toVec(g.origin()) : Vec3d{}, h, dims);
     return grid->validate().withPrefix("grid");

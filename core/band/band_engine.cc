@@ -19,10 +19,9 @@ namespace distband {
 std::string_view modeName(PropagationMode mode) { return mode == PropagationMode::kPaper ? "paper" : "exact"; }
 
 bool parseMode(std::string_view name, PropagationMode* mode) {
-  if (name == "paper") *mode = PropagationMode::kPaper;
-  else if (name == "exact") *mode = PropagationMode::kExact;
-  else return false;
-  return true;
+  for (PropagationMode m : kPropagationModes)
+    if (name == modeName(m)) return *mode = m, true;
+  return false;
 }
 
 StencilKind defaultStencil(SiteKind kind) {

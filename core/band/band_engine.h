@@ -41,6 +41,8 @@ enum class PropagationMode {
   kExact,
 };
 
+/// Every mode, the default first.
+inline constexpr PropagationMode kPropagationModes[] = {PropagationMode::kExact, PropagationMode::kPaper};
 std::string_view modeName(PropagationMode mode);
 bool parseMode(std::string_view name, PropagationMode* mode);  ///< "paper", "exact"
 

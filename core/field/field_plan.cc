@@ -11,9 +11,15 @@ std::string_view algorithmName(FieldAlgorithm algorithm) {
   return algorithm == FieldAlgorithm::kSeparable ? "separable" : "band";
 }
 
+std::optional<FieldAlgorithm> parseAlgorithm(std::string_view name) {
+  for (FieldAlgorithm a : {FieldAlgorithm::kBand, FieldAlgorithm::kSeparable})
+    if (name == algorithmName(a)) return a;
+  return std::nullopt;
+}
+
 std::string_view FieldPlan::signName() const {
   if (seeds == SeedKind::kMesh) return signMethodName(mesh_sign);
-  return seeds == SeedKind::kVolume && inside_negative ? "mask-inside" : "unsigned";
+  return seeds == SeedKind::kVolume && inside_negative ? kMaskInsideSign : signMethodName(SignMethod::kUnsigned);
 }
 
 std::string_view FieldPlan::closestFeatureName() const {
@@ -36,6 +42,31 @@ std::string algorithmDescription(FieldAlgorithm algorithm, SeedKind seeds, bool 
            "the first segment comes once those bricks are known";
   return "separable: an exact EDT over the whole grid, axis by axis; the first segment comes once the whole field is "
          "known";
+}
+
+Status requestSign(std::string_view name, FieldRequest* r) {
+  std::string mesh_names;  // "auto, pseudonormal, winding, parity or unsigned"
+  for (SignMethod m : kSignMethods) {
+    const bool last = m == kSignMethods[std::size(kSignMethods) - 1];
+    mesh_names += fmt::format("{}{}", mesh_names.empty() ? "" : last ? " or " : ", ", signMethodName(m));
+  }
+  const std::string takes = r->seeds == SeedKind::kMesh ? "meshes take " + mesh_names
+                            : r->seeds == SeedKind::kVolume
+                                ? fmt::format("volume seeds take auto, unsigned or {}", kMaskInsideSign)
+                                : std::string("point seeds take auto or unsigned");
+  SignMethod method;
+  if (name == kMaskInsideSign) {
+    if (r->seeds != SeedKind::kVolume)
+      return Status::InvalidArgument(fmt::format("{} is for volume seeds; {}", name, takes));
+    r->inside_negative = true;
+  } else if (!parseSignMethod(name, &method)) {
+    return Status::InvalidArgument(fmt::format("unknown sign '{}': {}", name, takes));
+  } else if (r->seeds == SeedKind::kMesh) {
+    r->mesh_sign = method;
+  } else if (method != SignMethod::kAuto && method != SignMethod::kUnsigned) {
+    return Status::InvalidArgument(fmt::format("{} is for meshes; {}", name, takes));
+  }
+  return Status::Ok();
 }
 
 FieldRunOptions FieldPlan::runOptions() const {

@@ -10,7 +10,8 @@
 // size. The plan then hands each stage its options, all from the same fields (the limit is stored once, in world
 // units): the run's (runOptions), the band's (bandOptions), the mesh seeds' (meshSeedOptions); what the chosen
 // algorithm consumes is built from it by core/field/compute_field.h, and its memory estimated by
-// core/field/field_memory.h. algorithmDescription() is the one text that tells users what each algorithm does.
+// core/field/field_memory.h. algorithmDescription() is the one text that tells users what each algorithm does;
+// requestSign() reads a sign by the name users give it, for the seeds at hand.
 // planField() returns OK or kInvalidArgument naming the choice that does not fit the seeds. Pure; thread-safe.
 #pragma once
 
@@ -36,11 +37,16 @@ enum class SeedKind { kPoints, kVolume, kMesh };
 /// seeds on few planes without a limit (core/separable/point_edt.h) — several times faster there and exact.
 enum class FieldAlgorithm { kBand, kSeparable };
 std::string_view algorithmName(FieldAlgorithm algorithm);  ///< "band", "separable"
+std::optional<FieldAlgorithm> parseAlgorithm(std::string_view name);
 
 /// What the algorithm does for these seeds, for people (the CLI's header line, the docs, the protocol's comment):
 /// e.g. "separable: an exact EDT over the whole grid, axis by axis; the first segment comes once the whole field is
 /// known". `limited`: the query has a finite limit.
 std::string algorithmDescription(FieldAlgorithm algorithm, SeedKind seeds, bool limited);
+
+/// The sign of a volume whose mask voxels get -distance (FieldRequest::inside_negative); meshes' signs are
+/// signMethodName's.
+inline constexpr std::string_view kMaskInsideSign = "mask-inside";
 
 struct FieldRequest {
   SeedKind seeds = SeedKind::kPoints;
@@ -97,6 +103,11 @@ struct FieldPlan {
   /// Mesh seeds on `grid` (the grid the engine runs on: for a tile, its window).
   MeshSeedOptions meshSeedOptions(const Grid& grid) const;
 };
+
+/// Sets the sign `request` asks for from its name: "auto" and "unsigned" (any seeds: the seeds' default, or no sign),
+/// a mesh sign method (signMethodName: pseudonormal, winding, parity) or kMaskInsideSign (volumes). Returns OK or
+/// kInvalidArgument saying which names the seeds take.
+Status requestSign(std::string_view name, FieldRequest* request);
 
 /// `mesh_report`: the loaded mesh's report (needed for meshes: the automatic sign reads its edges), else null.
 Status planField(const FieldRequest& request, const Grid& grid, const MeshReport* mesh_report, FieldPlan* plan);

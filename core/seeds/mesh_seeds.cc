@@ -42,8 +42,7 @@ std::string_view signMethodName(SignMethod method) {
   return "?";
 }
 bool parseSignMethod(std::string_view name, SignMethod* method) {
-  for (SignMethod m : {SignMethod::kAuto, SignMethod::kPseudonormal, SignMethod::kWinding, SignMethod::kParity,
-                       SignMethod::kUnsigned})
+  for (SignMethod m : kSignMethods)
     if (name == signMethodName(m)) return *method = m, true;
   return false;
 }

@@ -38,6 +38,9 @@ enum class MeshSiteMode { kExactFeature, kPaper };
 /// resolve it with resolveSignMethod before makeMeshSeeds.
 enum class SignMethod { kAuto, kPseudonormal, kWinding, kParity, kUnsigned };
 inline constexpr SignMethod kDefaultMeshSign = SignMethod::kAuto;
+/// Every method, the default first.
+inline constexpr SignMethod kSignMethods[] = {SignMethod::kAuto, SignMethod::kPseudonormal, SignMethod::kWinding,
+                                              SignMethod::kParity, SignMethod::kUnsigned};
 
 std::string_view meshSiteModeName(MeshSiteMode mode);
 bool parseMeshSiteMode(std::string_view name, MeshSiteMode* mode);  ///< "exact-feature", "paper"

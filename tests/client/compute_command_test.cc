@@ -74,8 +74,8 @@ TEST(ComputeCommandTest, LimitBackgroundAndSignedVolume) {
       for (int x = 3; x <= 16; ++x) mask[(size_t(z) * dims.y + y) * dims.x + x] = 1;
   const std::string in = tmp("box.npy"), out = tmp("box_field.npy"), meta = tmp("box_field.json");
   ASSERT_TRUE(IsOk(writeNpyMask(in, mask, dims)));
-  const CliResult r = run({"compute", "--volume", in, "--signed", "--limit", "2", "--segment", "1", "--out", out,
-                           "--meta", meta});
+  const CliResult r = run({"compute", "--volume", in, "--sign", "mask-inside", "--limit", "2", "--segment", "1",
+                           "--out", out, "--meta", meta});
   ASSERT_EQ(r.code, 0) << r.err;
   std::vector<float> v;
   Coord d;
@@ -155,9 +155,23 @@ TEST(ComputeCommandTest, UsageAndInputErrorsExitTwo) {
       {"unknown_flag", with({"--bogus"}, pts), "--bogus"},
       {"missing_out", {"compute", "--points", "1,1,1", "--dims", "8,8,8"}, "--out"},
       {"no_seeds", {"compute", "--dims", "8,8,8", "--out", out}, "exactly one seed source"},
-      {"both_seeds", with({"--volume", good_mask}, pts), "excludes"},
-      {"signed_points", with({"--signed"}, pts), "--signed"},
-      {"points_without_dims", {"compute", "--points", "1,1,1", "--out", out}, "--dims"},
+      {"both_seeds", with({"--volume", good_mask}, pts), "exactly one seed source"},
+      {"signed_points", with({"--sign", "mask-inside"}, pts), "--sign 'mask-inside': mask-inside is for volume seeds"},
+      {"mesh_sign_on_points", with({"--sign", "winding"}, pts), "--sign 'winding': winding is for meshes"},
+      {"origin_without_dims",
+       {"compute", "--points", "1,1,1", "--voxel-size", "1", "--origin", "1,2,3", "--out", out},
+       "--origin applies to --dims"},
+      {"resolution_with_dims", with({"--resolution", "16"}, pts), "--resolution does not apply to --dims"},
+      {"box_with_volume",
+       {"compute", "--volume", good_mask, "--box", "0,0,0,1,1,1", "--out", out},
+       "--box does not apply"},
+      {"inverted_box",
+       {"compute", "--points", "1,1,1", "--voxel-size", "1", "--box", "2,0,0,1,1,1", "--out", out},
+       "--box '2,0,0,1,1,1': the max corner"},
+      {"second_ring_points", with({"--second-ring"}, pts), "--second-ring applies to meshes"},
+      {"both_limits", with({"--limit", "2", "--limit-voxels", "2"}, pts), "--limit and --limit-voxels"},
+      {"negative_deadline", with({"--deadline", "-1"}, pts), "--deadline"},
+      {"points_without_grid", {"compute", "--points", "1,1,1", "--out", out}, "or --dims X,Y,Z"},
       {"dims_two", {"compute", "--points", "1,1,1", "--dims", "8,8", "--out", out}, "three comma-separated"},
       {"dims_zero", {"compute", "--points", "1,1,1", "--dims", "0,8,8", "--out", out}, "[1, 16384]"},
       {"dims_huge", {"compute", "--points", "1,1,1", "--dims", "8,99999,8", "--out", out}, "[1, 16384]"},
@@ -170,7 +184,9 @@ TEST(ComputeCommandTest, UsageAndInputErrorsExitTwo) {
       {"missing_volume", {"compute", "--volume", tmp("nope.npy"), "--out", out}, "cannot open"},
       {"malformed_volume", {"compute", "--volume", text_file, "--out", out}, "not a .npy file"},
       {"empty_volume", {"compute", "--volume", empty_mask, "--out", out}, "no nonzero voxel"},
-      {"signed_full_volume", {"compute", "--volume", good_mask, "--signed", "--out", out}, "no zero voxel"},
+      {"signed_full_volume",
+       {"compute", "--volume", good_mask, "--sign", "mask-inside", "--out", out},
+       "no zero voxel"},
       {"dims_mismatch", {"compute", "--volume", good_mask, "--dims", "4,4,5", "--out", out}, "disagrees"},
       {"bad_stencil", with({"--stencil", "cubic27"}, pts), "--stencil 'cubic27'"},
       {"bad_mode", with({"--mode", "fast"}, pts), "--mode 'fast'"},
@@ -181,11 +197,14 @@ TEST(ComputeCommandTest, UsageAndInputErrorsExitTwo) {
       {"negative_threads", with({"--threads", "-1"}, pts), "--threads"},
       {"zero_voxel_size", with({"--voxel-size", "0"}, pts), "--voxel-size"},
       {"zero_resolution",
-       {"compute", "--mesh", std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/bunny.obj", "--resolution", "0", "--out", out},
+       {"compute", "--mesh", std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/bunny.obj", "--resolution", "0", "--out",
+        out},
        "--resolution must be at least 2 voxels (got 0)"},
-      {"unsupported_out", {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", tmp("f.txt")},
+      {"unsupported_out",
+       {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", tmp("f.txt")},
        "--out " + tmp("f.txt") + ": expected a .vdb, .npy file"},
-      {"unwritable_out", {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", "/nonexistent/d/f.npy"},
+      {"unwritable_out",
+       {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", "/nonexistent/d/f.npy"},
        "does not exist"},
   };
   for (const Case& c : cases) {
@@ -400,6 +419,74 @@ TEST(ComputeCommandTest, ClosestGridBesideTheDistancesInTheVdb) {
   }
   EXPECT_GT(closest->activeVoxelCount(), 500u);
   EXPECT_EQ(wrong, 0);
+  std::remove(out.c_str());
+}
+
+}  // namespace
+}  // namespace distband
+
+namespace distband {
+namespace {
+
+// The grid's other two ways (GridSpec's): around the points' bounds without --dims, and a --box (gridForMesh's box:
+// the origin is the box's min, no padding unless asked, the longest side spans --resolution voxels).
+TEST(ComputeCommandTest, GridAroundThePointsOrInsideABox) {
+  const std::string out = tmp("grid_ways.npy"), meta = tmp("grid_ways.json");
+  CliResult r =
+      run({"compute", "--points", "1,2,3;4,6,5", "--voxel-size", "0.5", "--limit", "1", "--out", out, "--meta", meta});
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::vector<float> v;
+  Coord d;
+  ASSERT_TRUE(IsOk(readNpyFloat32(out, &v, &d)));
+  EXPECT_EQ(d, (Coord{13, 15, 11}));  // extents 3, 4, 2 over 0.5, + 1, + core's default padding of 3 on both sides
+  EXPECT_NE(readText(meta).find("\"padding_voxels\": 3"), std::string::npos) << readText(meta);
+
+  const std::string mesh = std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/fandisk.off";
+  r = run({"compute", "--mesh", mesh, "--resolution", "21", "--box", "0,0,0,1,2,1", "--limit-voxels", "2", "--out", out,
+           "--meta", meta});
+  ASSERT_EQ(r.code, 0) << r.err;
+  ASSERT_TRUE(IsOk(readNpyFloat32(out, &v, &d)));
+  EXPECT_EQ(d, (Coord{11, 21, 11}));  // voxel size 2 / 20
+  EXPECT_NE(readText(meta).find("\"padding_voxels\": 0"), std::string::npos) << readText(meta);
+  std::remove(out.c_str());
+  std::remove(meta.c_str());
+}
+
+// --deadline stops the run as Ctrl-C does, but exits 1: the command failed to finish in time.
+TEST(ComputeCommandTest, DeadlineStopsTheRunAndExitsOne) {
+  const std::string out = tmp("deadline.npy");
+  const CliResult r = run({"compute", "--points", "80,80,80", "--dims", "160,160,160", "--segment", "0.5", "--deadline",
+                           "0.000001", "--out", out});
+  EXPECT_EQ(r.code, kExitFailure) << r.err;
+  EXPECT_NE(r.err.find("the deadline (--deadline) passed"), std::string::npos) << r.err;
+  std::remove(out.c_str());
+}
+
+// The header names the algorithm with core's words (algorithmDescription), the band's stencil with it.
+TEST(ComputeCommandTest, HeaderNamesTheAlgorithmInCoresWords) {
+  const std::string out = tmp("algorithm.npy");
+  CliResult r = run({"compute", "--points", "1,1,1", "--dims", "16,16,16", "--stencil", "cubic18", "--out", out});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("algorithm: " + algorithmDescription(FieldAlgorithm::kBand, SeedKind::kPoints, false) +
+                       "; stencil cubic18\n"),
+            std::string::npos)
+      << r.out;
+  r = run({"compute", "--points", "1,1,1", "--dims", "16,16,16", "--out", out});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(
+      r.out.find("algorithm: " + algorithmDescription(FieldAlgorithm::kSeparable, SeedKind::kPoints, false) + "\n"),
+      std::string::npos)
+      << r.out;
+  // --algorithm names the algorithm; the planner refuses the separable one where it does not apply.
+  r = run({"compute", "--points", "1,1,1", "--dims", "16,16,16", "--algorithm", "band", "--out", out});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("algorithm: " + algorithmDescription(FieldAlgorithm::kBand, SeedKind::kPoints, false)),
+            std::string::npos)
+      << r.out;
+  r = run({"compute", "--points", "1,1,1", "--dims", "16,16,16", "--algorithm", "separable", "--limit", "3", "--out",
+           out});
+  EXPECT_EQ(r.code, kExitUsage);
+  EXPECT_NE(r.err.find("algorithm: separable applies"), std::string::npos) << r.err;
   std::remove(out.c_str());
 }
 

@@ -35,5 +35,28 @@ TEST(InterruptWatchTest, NoPredicateNeverTrips) {
   EXPECT_FALSE(watch.interrupter().interrupted());
 }
 
+// --deadline: the watch trips when the deadline passes, with kDeadlineExceeded (not the user's kCancelled), and runs
+// on_stop once, so a command whose work does not poll the interrupter (a remote query) is stopped too.
+TEST(InterruptWatchTest, ADeadlineTripsItAndRunsOnStopOnce) {
+  std::atomic<int> stops{0};
+  InterruptWatch watch(nullptr, Interrupter::Clock::now() + std::chrono::milliseconds(30), [&] { ++stops; });
+  EXPECT_FALSE(watch.deadlinePassed());
+  const auto t0 = std::chrono::steady_clock::now();
+  while (stops.load() == 0 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(5))
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  std::this_thread::sleep_for(std::chrono::milliseconds(30));  // more polls: on_stop must not run again
+  EXPECT_EQ(stops.load(), 1);
+  EXPECT_TRUE(watch.interrupter().interrupted());
+  EXPECT_TRUE(watch.deadlinePassed());
+}
+
+TEST(InterruptWatchTest, AStopAskedBeforehandRunsOnStopAtOnce) {
+  int stops = 0;
+  InterruptWatch watch([] { return true; }, std::nullopt, [&] { ++stops; });
+  EXPECT_EQ(stops, 1);
+  EXPECT_FALSE(watch.deadlinePassed());
+  EXPECT_EQ(watch.interrupter().status().code(), Status::Code::kCancelled);
+}
+
 }  // namespace
 }  // namespace distband

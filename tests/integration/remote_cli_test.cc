@@ -17,6 +17,7 @@
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
+#include "core/stencil.h"
 #include "server/server.h"
 #include "tests/support/status_testing.h"
 #include "tests/support/run_command.h"
@@ -132,12 +133,14 @@ TEST(RemoteCliTest, QueryWritesALevelSetVdbThatMatchesTheEngine) {
 
 TEST(RemoteCliTest, ServerRejectionIsAUsageErrorAndWritesNothing) {
   Fixture f;
-  EXPECT_EQ(f.run({"query", "--server", f.address, "--mesh", f.path("cube.obj"), "--resolution", "1", "--limit",
-                   "0.3", "--out", f.path("bad.vdb"), "--progress", "quiet"}),
+  // A combination only the grid's builder judges (a resolution that leaves no voxel inside its padding) the server
+  // refuses.
+  EXPECT_EQ(f.run({"query", "--server", f.address, "--mesh", f.path("cube.obj"), "--resolution", "4", "--padding", "3",
+                   "--limit", "0.3", "--out", f.path("bad.vdb"), "--progress", "quiet"}),
             2);
-  EXPECT_NE(f.err.str().find("grid.resolution"), std::string::npos) << f.err.str();
   // The server's answer reads as a sentence, then its message.
-  EXPECT_NE(f.err.str().find("the server refused the request: grid.resolution"), std::string::npos) << f.err.str();
+  EXPECT_NE(f.err.str().find("the server refused the request: grid: resolution 4 leaves no voxel"), std::string::npos)
+      << f.err.str();
   EXPECT_FALSE(fs::exists(f.path("bad.vdb")));
   // A slice needs a finite limit (its colour scale): refused before contacting the server.
   EXPECT_EQ(f.run({"query", "--server", f.address, "--points", "1,2,3", "--dims", "8,8,8", "--voxel-size", "1",
@@ -210,6 +213,100 @@ TEST(RemoteCliTest, InterruptCancelsTheQueryAndWritesNothing) {
                          /*interrupt=*/true);
   EXPECT_EQ(code, 130) << f.err.str();
   EXPECT_FALSE(fs::exists(f.path("never.vdb")));
+}
+
+// The field flags mean the same in both commands (client/field_flags.h): the same flags give the same field, byte for
+// byte, whether the engine runs in-process or on the server, in each of the grid's three ways and for every seed kind.
+TEST(RemoteCliTest, TheSameFieldFlagsGiveComputeAndQueryTheSameField) {
+  Fixture f;
+  const Coord dims{20, 18, 16};
+  std::vector<uint8_t> mask(size_t(dims.x) * dims.y * dims.z, 0);
+  for (int z = 4; z < 12; ++z)
+    for (int y = 5; y < 13; ++y)
+      for (int x = 6; x < 14; ++x) mask[(size_t(z) * dims.y + y) * dims.x + x] = 1;
+  ASSERT_TRUE(IsOk(writeNpyMask(f.path("box.npy"), mask, dims)));
+  const std::vector<std::vector<std::string>> cases = {
+      {"--mesh", f.path("cube.obj"), "--voxel-size", "0.1", "--box", "-1.2,-1.2,-1.2,1.2,1.2,1.2", "--padding", "1",
+       "--sign", "winding", "--stencil", "cubic26", "--limit", "0.4"},
+      {"--mesh", f.path("cube.obj"), "--dims", "24,24,24", "--voxel-size", "0.1", "--origin", "-1.15,-1.15,-1.15",
+       "--limit", "0.3", "--mode", "paper", "--segment", "0.1"},
+      {"--mesh", f.path("cube.obj"), "--resolution", "30", "--limit-voxels", "3", "--sign", "parity"},
+      {"--points", "1,2,3;6,5,4", "--voxel-size", "0.5", "--limit", "2", "--segment", "0.5"},
+      {"--points", "1,2,3;9,9,9", "--dims", "16,16,16"},
+      {"--volume", f.path("box.npy"), "--sign", "mask-inside", "--limit-voxels", "3"},
+      {"--volume", f.path("box.npy"), "--stencil", "fcc12", "--voxel-size", "0.25", "--origin", "1,2,3"},
+  };
+  for (const std::vector<std::string>& flags : cases) {
+    std::string label;
+    for (const std::string& a : flags) label += a + " ";
+    std::vector<std::string> compute = {"compute", "--out", f.path("compute.npy")};
+    std::vector<std::string> query = {"query", "--server", f.address,          "--progress",
+                                      "quiet", "--out",    f.path("query.npy")};
+    compute.insert(compute.end(), flags.begin(), flags.end());
+    query.insert(query.end(), flags.begin(), flags.end());
+    ASSERT_EQ(f.run(compute), 0) << label << f.err.str();
+    const std::string compute_algorithm = f.out.str().substr(f.out.str().find("algorithm: "));
+    ASSERT_EQ(f.run(query), 0) << label << f.err.str();
+    const std::string query_out = f.out.str();
+    EXPECT_NE(query_out.find(compute_algorithm.substr(0, compute_algorithm.find('\n') + 1)), std::string::npos)
+        << label << "\ncompute: " << compute_algorithm << "\nquery: " << query_out;
+    std::ifstream a(f.path("compute.npy"), std::ios::binary), b(f.path("query.npy"), std::ios::binary);
+    const std::string bytes_a((std::istreambuf_iterator<char>(a)), {}),
+        bytes_b((std::istreambuf_iterator<char>(b)), {});
+    EXPECT_GT(bytes_a.size(), 128u) << label;
+    EXPECT_TRUE(bytes_a == bytes_b) << label << ": the two commands wrote different fields";
+  }
+}
+
+// The flags' names reach the server and come back in the header as the same names (no table on either side: the
+// protocol's values are core's names in upper case), for every stencil and every mesh sign core knows.
+TEST(RemoteCliTest, EveryStencilAndSignNameRoundTripsThroughTheProtocol) {
+  Fixture f;
+  auto meta = [&] {
+    std::ifstream in(f.path("q.json"));
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  for (StencilKind k : kStencilKinds) {
+    const std::string name(stencilName(k));
+    ASSERT_EQ(f.run({"query", "--server", f.address, "--progress", "quiet", "--points", "3,3,3", "--dims", "12,12,12",
+                     "--stencil", name, "--limit", "3", "--out", f.path("q.npy"), "--meta", f.path("q.json")}),
+              0)
+        << f.err.str();
+    EXPECT_NE(meta().find("\"stencil\": \"" + name + "\""), std::string::npos) << name << meta();
+  }
+  for (SignMethod m : kSignMethods) {
+    if (m == SignMethod::kUnsigned) continue;  // an unsigned field's metadata names no method
+    ASSERT_EQ(f.run({"query", "--server", f.address, "--progress", "quiet", "--mesh", f.path("cube.obj"),
+                     "--resolution", "16", "--sign", std::string(signMethodName(m)), "--limit", "0.3", "--out",
+                     f.path("q.npy"), "--meta", f.path("q.json")}),
+              0)
+        << f.err.str();
+    const std::string method = m == SignMethod::kAuto ? "pseudonormal" : std::string(signMethodName(m));  // closed
+    EXPECT_NE(meta().find("\"method\": \"" + method + "\""), std::string::npos) << method << meta();
+  }
+}
+
+// --second-ring is a field flag query shares but cannot send: QueryRequest has no field for it. It is refused, not
+// dropped, before anything is uploaded.
+TEST(RemoteCliTest, QueryRefusesTheSecondRingItCannotSend) {
+  Fixture f;
+  EXPECT_EQ(f.run({"query", "--server", f.address, "--mesh", f.path("cube.obj"), "--resolution", "16", "--second-ring",
+                   "--out", f.path("never.npy")}),
+            kExitUsage);
+  EXPECT_NE(f.err.str().find("--second-ring: the service's QueryRequest has no field"), std::string::npos)
+      << f.err.str();
+  EXPECT_EQ(f.out.str().find("uploaded"), std::string::npos) << f.out.str();
+  EXPECT_FALSE(fs::exists(f.path("never.npy")));
+}
+
+// --deadline stops a query as Ctrl-C does (the server stops its engine; the complete segments are kept), with exit 1.
+TEST(RemoteCliTest, DeadlineStopsTheQueryAndExitsOne) {
+  Fixture f;
+  const int code =
+      f.run({"query", "--server", f.address, "--points", "1,2,3", "--dims", "256,256,256", "--segment", "1", "--limit",
+             "200", "--deadline", "0.000001", "--out", f.path("late.npy"), "--progress", "quiet"});
+  EXPECT_EQ(code, kExitFailure) << f.err.str();
+  EXPECT_NE(f.err.str().find("the deadline (--deadline) passed"), std::string::npos) << f.err.str();
 }
 
 TEST(RemoteCliTest, UploadInfoHealth) {

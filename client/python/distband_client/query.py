@@ -43,7 +43,13 @@ class Header:
     closest_feature: str    # 'none', 'triangle', 'point' or 'voxel'
     expected_voxels: int    # the server's estimate of the voxels it will deliver; 0 = unknown
     query_id: str
-    algorithm: str          # "band" or "separable" (a seed volume over the whole grid)
+    # How the field was computed (QueryHeader.algorithm; core's algorithmDescription says the same): "band", the
+    # adaptive iteration on an evolving active band (SMI 2009; any seeds), whose segments stream nearest first as the
+    # band passes them; or "separable", an exact EDT axis by axis (exact mode, no stencil or second ring asked for):
+    # over the whole grid for a seed volume without a limit and for point seeds on few lattice planes without a limit,
+    # over the bricks within the limit of the boundary for a limited seed volume; its first segment comes once that
+    # whole field (or those bricks) is known.
+    algorithm: str
 
     @classmethod
     def from_proto(cls, h):

@@ -150,6 +150,37 @@ TEST(FieldDefaultsTest, PlannerDecidesModeSitesStencilSignAndLimit) {
 
 // The algorithm: the separable EDTs where they compute the same exact field faster, the band where the request asks
 // for the propagation itself or the separable passes cannot follow it.
+// Names as users give them (the CLI's --sign, the protocol's SignMode): each seed kind takes its own, and refuses the
+// others saying which it takes; the algorithm's and the tables' names read back to the same values.
+TEST(FieldDefaultsTest, SignAndAlgorithmNamesReadBack) {
+  FieldRequest mesh, volume, points;
+  mesh.seeds = SeedKind::kMesh;
+  volume.seeds = SeedKind::kVolume;
+  for (SignMethod m : kSignMethods) {
+    EXPECT_TRUE(IsOk(requestSign(signMethodName(m), &mesh)));
+    EXPECT_EQ(mesh.mesh_sign, m);
+  }
+  EXPECT_TRUE(IsOk(requestSign(kMaskInsideSign, &volume)));
+  EXPECT_TRUE(volume.inside_negative);
+  EXPECT_TRUE(IsOk(requestSign("unsigned", &points)));
+  EXPECT_TRUE(IsOk(requestSign("auto", &points)));
+  EXPECT_FALSE(points.mesh_sign || points.inside_negative) << "points keep the planner's default";
+  EXPECT_TRUE(IsError(requestSign(kMaskInsideSign, &mesh), Status::Code::kInvalidArgument,
+                      "mask-inside is for volume seeds; meshes take auto, pseudonormal, winding, parity or unsigned"));
+  EXPECT_TRUE(IsError(requestSign("winding", &volume), Status::Code::kInvalidArgument,
+                      "winding is for meshes; volume seeds take auto, unsigned or mask-inside"));
+  EXPECT_TRUE(IsError(requestSign("signed", &points), Status::Code::kInvalidArgument, "unknown sign 'signed'"));
+  for (FieldAlgorithm a : {FieldAlgorithm::kBand, FieldAlgorithm::kSeparable})
+    EXPECT_EQ(parseAlgorithm(algorithmName(a)), a);
+  EXPECT_FALSE(parseAlgorithm("fast"));
+  for (StencilKind k : kStencilKinds) EXPECT_EQ(parseStencil(stencilName(k)), k);
+  for (PropagationMode m : kPropagationModes) {
+    PropagationMode read;
+    EXPECT_TRUE(parseMode(modeName(m), &read));
+    EXPECT_EQ(read, m);
+  }
+}
+
 TEST(FieldDefaultsTest, PlannerPicksTheSeparableEdtsOnlyWhereTheyDeliverTheSameField) {
   const Grid grid({0, 0, 0}, 1, {64, 64, 64});
   using Change = std::function<void(FieldRequest&)>;
