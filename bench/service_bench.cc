@@ -308,7 +308,7 @@ int main(int argc, char** argv) {
         }
         r.kept = {};
       }
-      if (correct == 0) verdict.fail(load_name, q.grid, "no query completed, so none was checked");
+      if (correct + wrong == 0) verdict.fail(load_name, q.grid, "no query completed, so none was checked");
       md_load = fmt::format(
           "\n| load test | queries | max concurrent | correct | RESOURCE_EXHAUSTED | wrong | other errors | wall s | "
           "server RSS idle MB | server RSS peak MB (sampled) | server VmHWM MB |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
