@@ -4,9 +4,10 @@
 //   * sampleMesh(): brute force at `voxels` (in parallel): each one's exact distance and whether the winding number
 //     puts it inside. checkMeshSamples() compares delivered `values` (world units, NaN: not delivered, counted as
 //     missing) with them. A sign error is a voxel farther than 1e-3 voxel from the surface whose sign
-//     disagrees with the exact winding number (> 0.5 inside); it fails only on a closed mesh (an open mesh's inside
-//     is not defined where the winding number is near 0.5, and the docs promise nothing there).
-//   * The result's ok() is: max error <= bound, no sign error on a closed mesh, nothing missing where `require_all`.
+//     disagrees with the exact winding number (> 0.5 inside); sign errors fail only where the caller says the sign is
+//     defined (`closed`: a closed mesh with a signed field; an open mesh's inside is not defined where the winding
+//     number is near 0.5, and the docs promise nothing there).
+//   * The result's ok() is: max error <= bound, no sign error where `closed`, nothing missing where `require_all`.
 //     describe() names the first bad voxel.
 // Thread-safe; bench code only.
 #pragma once
@@ -23,7 +24,7 @@ namespace distband::bench {
 
 struct MeshSampleCheck {
   double bound_voxels = 0;
-  bool closed = true;
+  bool closed = true;  ///< sign errors fail (a closed mesh with a signed field)
   int64_t compared = 0, missing = 0, over_bound = 0, sign_errors = 0;
   double max_err_voxels = 0, mean_err_voxels = 0;
   Coord first_bad{-1, -1, -1};  ///< the first sample (in the order given) over the bound or with a sign error

@@ -11,7 +11,8 @@
 //     repeated or out-of-grid voxel is visible.
 //   * Judging: compareFields names the first voxel (in z, y, x order) where two delivered fields differ beyond a
 //     FieldTolerance; Verdict collects a bench's failures ("FAIL <case> [<grid>]: <what>" on stderr as they are
-//     found) and gives the exit status: kExitWrong when anything failed.
+//     found) and gives the exit status: kExitWrong when anything failed. meshErrorBoundVoxels is the accuracy the
+//     docs promise for a mesh field of a plan, the bound the mesh benches judge by.
 // Bench code only; thread-safe where stated.
 #pragma once
 
