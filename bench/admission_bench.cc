@@ -1,9 +1,13 @@
 // admission_bench: does the server's admission estimate (server/request_validation.cc -> core/field/field_memory.h)
-// stay above what a query really uses? For each case the query is resolved exactly as the server resolves it, then
-// run in a child process through the server's own QueryJob (seeds, engine, encoding, the bounded queue drained by
-// the parent thread), and the child's peak RSS growth during the run is compared with the estimate.
+// stay above what a query really uses? For each case the query is resolved by the server's own path
+// (bench/server_reference.h: an inline mesh parsed by the server's parser, then resolveQuery), then run in a child
+// process through the server's own QueryJob (seeds, engine, encoding, the bounded queue drained by the parent
+// thread), and the child's peak RSS growth during the run is compared with the estimate.
+// Reference: none for the field (this bench measures memory; the field itself is what the server's QueryJob makes).
+// Pass: every query completes (exit 1 otherwise, naming the case); goal (exit 3): every measured peak below its
+// estimate. --smoke runs the three small cases (points, a signed shell volume, the bunny) and writes no results file.
 //
-//   build/bench/admission_bench [--cases all|NAME,...] [--threads 2] [--mesh-dir DIR] [--tag NAME]
+//   build/bench/admission_bench [--cases all|NAME,...] [--threads 2] [--mesh-dir DIR] [--tag NAME] [--smoke]
 //
 // Output: one row per case (grid, limit, touched-voxel bound, delivered voxels, estimate, measured peak, ratio) to
 // stdout and bench/results/<tag>.md. A ratio above 1 would mean the server can be pushed past its budget.
@@ -24,8 +28,9 @@
 #include <tbb/task_arena.h>
 
 #include "bench/bench_util.h"
+#include "bench/planned_field.h"
+#include "bench/server_reference.h"
 #include "core/interrupter.h"
-#include "server/asset_parsing.h"
 #include "server/memory_budget.h"
 #include "server/query_job.h"
 #include "server/request_validation.h"
@@ -77,27 +82,14 @@ v1::QueryRequest mesh(const std::string& path, int resolution, double half_width
   r.mutable_grid()->set_resolution(uint32_t(resolution));
   r.set_mode(mode);
   r.set_sign(sign);
-  // The limit in world units follows the voxel size the server will pick; -1 marks "voxels" for resolve().
-  r.set_limit(half_width_voxels);
+  if (half_width_voxels > 0) r.set_limit_voxels(half_width_voxels);  // 0: no limit
   return r;
 }
 
-/// Resolves like the server: an inline mesh is parsed first; a mesh's limit is given in voxels here.
-Status resolve(v1::QueryRequest request, const ServerOptions& options, ResolvedQuery* q) {
-  AssetCache cache(uint64_t(1) << 30);
-  std::shared_ptr<const Asset> inline_mesh;
-  const double limit_voxels = request.limit();
-  if (request.seeds_case() == v1::QueryRequest::kMesh) {
-    if (Status s = parseMeshAsset(request.mesh().data(), request.mesh().format(), "bench", "mesh", MeshLimits{},
-                                  nullptr, &inline_mesh);
-        !s.ok())
-      return s;
-    request.set_limit(0);
-    ResolvedQuery probe;
-    if (Status s = resolveQuery(request, options, cache, inline_mesh, &probe); !s.ok()) return s;
-    request.set_limit(limit_voxels > 0 ? limit_voxels * probe.grid.voxelSize() : 0);
-  }
-  return resolveQuery(request, options, cache, inline_mesh, q);
+/// Resolves as the server does (bench/server_reference.h: an inline mesh is parsed first).
+Status resolve(const v1::QueryRequest& request, const ServerOptions& options, ResolvedQuery* q) {
+  bench::ServerReference server(options);
+  return server.resolve(request, q);
 }
 
 struct Measured {
@@ -154,13 +146,20 @@ int run(int argc, char** argv) {
   app.add_option("--mesh-dir", mesh_dir, "directory with bunny.obj, fandisk.off, teapot.obj (armadillo.off if present)");
   app.add_option("--tag", tag, "output name under bench/results/");
   app.add_option("--child", child, "(internal) measure one case in this process");
+  bool smoke = false;
+  app.add_flag("--smoke", smoke, "the small cases only (the CTest run); writes no results file");
   CLI11_PARSE(app, argc, argv);
+  if (smoke) cases_arg = "points_1_64_unlimited,shell_64_signed_limit3,bunny_64_exact_hw3";
 
   // Made on first use: the parent only estimates, each child builds its own input.
   auto shell256 = [] { return bench::sphereShellMask(256); };
   auto blobs256 = [] { return bench::randomBlobsMask(256); };
   const double inf = 0;  // 0 = no limit
   std::vector<Case> cases = {
+      {"points_1_64_unlimited", [&] { return points({{20.5, 30.25, 40}}, 64, inf); }},
+      {"shell_64_signed_limit3", [&] { return volume(bench::sphereShellMask(64), 64, true, 3); }},
+      {"bunny_64_exact_hw3",
+       [&] { return mesh(mesh_dir + "/bunny.obj", 64, 3, v1::PROPAGATION_MODE_EXACT, v1::SIGN_MODE_PSEUDONORMAL); }},
       {"points_1_256_unlimited", [&] { return points({{128, 128, 128}}, 256, inf); }},
       {"points_2_384_unlimited", [&] { return points({{128, 128, 128}, {255, 255, 255}}, 384, inf); }},
       {"points_1_512_limit10", [&] { return points({{200, 300, 256}}, 512, 10); }},
@@ -218,8 +217,8 @@ int run(int argc, char** argv) {
     const double estimate = double(q.memory.total() + options.stream_buffer_bytes);
     const Measured m = runInChild(self, c, mesh_dir, threads);
     if (!m.ok) {
-      std::cerr << c.name << ": the query failed in the child\n";
-      return 1;
+      std::cerr << "admission_bench: FAIL " << c.name << ": the query failed in the child\n";
+      return bench::kExitWrong;
     }
     const double ratio = m.peak_bytes / estimate;
     all_under = all_under && ratio <= 1.0;
@@ -232,7 +231,7 @@ int run(int argc, char** argv) {
   }
   md << fmt::format("\n{}\n", all_under ? "Every measured peak is below its estimate."
                                         : "**Some measured peak exceeds its estimate.**");
-  std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md.str();
+  if (!smoke) std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md.str();
   return all_under ? 0 : 3;
 }
 

@@ -7,14 +7,19 @@
 // at 1024^3 that is GBs of bricks, whose release costs time in proportion, not compute).
 //
 //   build/bench/cancel_bench [--resolution 1024] [--threads 2] [--samples 10] [--max-run-s 30] [--cases all|a,b]
-//                            [--mesh-dir DIR]
+//                            [--mesh-dir DIR] [--smoke]
 //
-// Cases: mesh seeds with each sign method (armadillo if --mesh-dir has it, else the bunny; half-width 3), the engine
+// Cases: mesh seeds with each sign method (armadillo if --mesh-dir has it, else the bunny; half-width 3), the band
 // on two points (full domain: propagation, second-ring correction and emission in one segment; and in 8 segments),
-// a limited band around a sphere shell volume (seeds and engine), and emission alone (segments of N/16, the consumer
-// cancels from inside a chunk callback of one of the first segments, so the engine is mid-emission), and the separable
-// EDTs the planner picks for whole-grid points and volumes (their state is freed inside the call: "compute stops"
-// includes it). Output: a markdown table (median and max per case).
+// the band within a limit around a sphere shell volume (seeds and engine), and emission alone (segments of N/16, the
+// consumer cancels from inside a chunk callback of one of the first segments, so the engine is mid-emission), and the
+// separable EDTs the planner picks for whole-grid points and volumes (their state is freed inside the call: "compute
+// stops" includes it). Every case is a FieldRequest planned and run as `distband compute` does (bench/planned_field.h);
+// the band cases ask for it with an explicit stencil, and a case whose plan is not the algorithm it measures fails.
+// Reference: none (this bench measures latency, not fields).
+// Pass: every case plans as expected (else exit 1); goal (exit 3): the worst compute stop at most 100 ms.
+// --smoke: 64^3, 2 samples a case, runs capped at 2 s, no results file.
+// Output: a markdown table (median and max per case).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -30,13 +35,9 @@
 #include <tbb/task_arena.h>
 
 #include "bench/bench_util.h"
-#include "core/band/band_engine.h"
+#include "bench/planned_field.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
-#include "core/seeds/mesh_seeds.h"
-#include "core/seeds/point_seeds.h"
-#include "core/seeds/volume_seeds.h"
-#include "core/separable/volume_edt.h"
 #include "core/separable/point_edt.h"
 
 namespace distband {
@@ -71,81 +72,124 @@ int run(int argc, char** argv) {
   app.add_option("--cases", cases_arg, "all, or a comma-separated list");
   app.add_option("--mesh-dir", mesh_dir, "where armadillo.off (or bunny.obj) is");
   app.add_option("--tag", tag, "output name under bench/results/");
+  bool smoke = false;
+  app.add_flag("--smoke", smoke, "64^3, 2 samples, runs capped at 2 s, no results file (the CTest run)");
   CLI11_PARSE(app, argc, argv);
+  if (smoke) {
+    resolution = 64;
+    samples = 2;
+    max_run_s = 2;
+  }
   tbb::task_arena arena(threads);
   const int n = resolution;
 
   TriangleMesh mesh;
+  MeshReport report;
   std::string mesh_name = "armadillo.off";
-  if (!loadMesh(mesh_dir + "/" + mesh_name, &mesh, nullptr).ok()) {
+  if (!loadMesh(mesh_dir + "/" + mesh_name, &mesh, &report).ok()) {
     mesh_name = "bunny.obj";
-    if (Status e = loadMesh(mesh_dir + "/" + mesh_name, &mesh, nullptr); !e.ok()) {
+    if (Status e = loadMesh(mesh_dir + "/" + mesh_name, &mesh, &report); !e.ok()) {
       std::fprintf(stderr, "%s\n", e.toString().c_str());
       return 1;
     }
   }
-  Grid mesh_grid;
-  MeshGridOptions go;
-  go.resolution = n;
-  (void)gridForMesh(mesh, go, {}, &mesh_grid);
   const Grid grid({0, 0, 0}, 1.0, {n, n, n});
   const std::vector<Vec3d> two_points = {{n * 0.31, n * 0.42, n * 0.53}, {n * 0.77, n * 0.18, n * 0.66}};
-  std::vector<uint8_t> shell;  // made on first use
+  std::shared_ptr<const std::vector<uint8_t>> shell;  // made on first use
+  auto shellMask = [&] {
+    if (!shell) shell = std::make_shared<const std::vector<uint8_t>>(bench::sphereShellMask(n));
+    return shell;
+  };
   Clock::time_point self_cancelled{};  // when a case cancelled itself from inside its callback
+  std::vector<std::string> plan_errors;
+  // Every case is planned as `distband compute` plans it (bench/planned_field.h); a case that measures the band
+  // where the planner would take a separable EDT asks for the band's stencil explicitly.
+  auto plan = [&](const FieldRequest& request, FieldAlgorithm expected) {
+    bench::PlannedField p;
+    MeshGridOptions go;
+    go.resolution = n;
+    const Status e = request.seeds == SeedKind::kMesh ? bench::planMeshField(request, mesh, report, go, &p)
+                                                      : bench::planGridField(request, grid, &p);
+    if (!e.ok()) plan_errors.push_back(e.toString());
+    else if (p.plan.algorithm != expected)
+      plan_errors.push_back(fmt::format("the planner picks {} where this case measures {}",
+                                        algorithmName(p.plan.algorithm), algorithmName(expected)));
+    return p;
+  };
+  auto pointsRequest = [&](bool band, double segment, double limit) {
+    FieldRequest r;
+    r.seeds = SeedKind::kPoints;
+    r.point_layout = pointLayout(two_points);
+    if (band) r.stencil = StencilKind::kCubic26;  // asks for the propagation itself
+    r.segment_length_world = segment;
+    r.limit_world = limit;
+    return r;
+  };
+  auto shellRequest = [&](bool band, double limit) {
+    FieldRequest r;
+    r.seeds = SeedKind::kVolume;
+    r.inside_negative = true;
+    if (band) r.stencil = StencilKind::kCubic26;
+    r.limit_world = limit;
+    return r;
+  };
 
   auto meshSeeds = [&](SignMethod sign) {
-    return [&, sign](Interrupter& stop) {
-      MeshSeedOptions so;
-      so.sign = sign;
-      so.limit_voxels = 3;
-      so.interrupter = &stop;
-      Seeds seeds;
-      return Outcome{makeMeshSeeds(mesh_grid, mesh, so, &seeds).code() == Status::Code::kCancelled};
+    FieldRequest r;
+    r.seeds = SeedKind::kMesh;
+    r.mesh_sign = sign;
+    r.limit_voxels = 3;
+    const bench::PlannedField planned = plan(r, FieldAlgorithm::kBand);
+    return [&, planned](Interrupter& stop) {
+      SeedSource source;
+      source.mesh = &mesh;
+      FieldInputs inputs;
+      return Outcome{bench::buildPlannedInputs(planned, source, &stop, &inputs).code() == Status::Code::kCancelled};
     };
   };
   auto engine = [&](double segment, double limit, size_t chunk, std::function<bool(const SegmentBricks&)> cancel_in) {
-    return [&, segment, limit, chunk, cancel_in](Interrupter& stop) {
-      Seeds seeds;
-      makePointSeeds(grid, two_points, &seeds);
-      BandOptions o;
-      o.segment_length_world = segment;
-      o.limit_world = limit;
-      o.max_chunk_bricks = chunk;
-      o.interrupter = &stop;
-      const FieldRunResult r = computeBandField(grid, std::move(seeds), o, [&](SegmentBricks&& s) {
+    const bench::PlannedField planned = plan(pointsRequest(true, segment, limit), FieldAlgorithm::kBand);
+    return [&, planned, chunk, cancel_in](Interrupter& stop) {
+      SeedSource source;
+      source.points = &two_points;
+      bench::RunSettings settings;
+      settings.max_chunk_bricks = chunk;
+      settings.interrupter = &stop;
+      const bench::PlannedRun r = bench::runPlannedField(planned, source, settings, [&](SegmentBricks&& s) {
         if (cancel_in && cancel_in(s)) {
           self_cancelled = Clock::now();
           stop.cancel();
         }
       });
-      return Outcome{r.interrupted, r.release_seconds * 1000};
+      return Outcome{r.result.interrupted, r.result.release_seconds * 1000};
     };
   };
-  auto shellBand = [&](Interrupter& stop) {
-    if (shell.empty()) shell = bench::sphereShellMask(n);
-    Seeds seeds;
-    if (makeVolumeSeeds(grid, shell, true, &seeds, &stop).code() == Status::Code::kCancelled) return Outcome{true};
-    BandOptions o;
-    o.limit_world = 5;
-    o.interrupter = &stop;
-    const FieldRunResult r = computeBandField(grid, std::move(seeds), o, [](SegmentBricks&&) {});
-    return Outcome{r.interrupted, r.release_seconds * 1000};
+  // The volume's inputs and its run: with an explicit stencil the band, else the separable EDT the planner picks.
+  auto shellCase = [&](bool band, double limit) {
+    const bench::PlannedField planned =
+        plan(shellRequest(band, limit), band ? FieldAlgorithm::kBand : FieldAlgorithm::kSeparable);
+    return [&, planned](Interrupter& stop) {
+      SeedSource source;
+      source.mask = shellMask();
+      bench::RunSettings settings;
+      settings.max_chunk_bricks = 1024;
+      settings.interrupter = &stop;
+      const bench::PlannedRun r = bench::runPlannedField(planned, source, settings, [](SegmentBricks&&) {});
+      if (r.status.code() == Status::Code::kCancelled) return Outcome{true};
+      return Outcome{r.result.interrupted, r.result.release_seconds * 1000};
+    };
   };
-  // The algorithms the planner picks for whole-grid points and volumes (core/separable/point_edt.h, separable_edt.h).
-  auto separablePoints = [&](Interrupter& stop) {
-    Seeds seeds;
-    makePointSeeds(grid, two_points, &seeds);
-    BandOptions o;
-    o.max_chunk_bricks = 1024;
-    o.interrupter = &stop;
-    return Outcome{computeSeparablePointField(grid, seeds, o, [](SegmentBricks&&) {}).interrupted};
-  };
-  auto separableShell = [&](Interrupter& stop) {
-    if (shell.empty()) shell = bench::sphereShellMask(n);
-    BandOptions o;
-    o.max_chunk_bricks = 1024;
-    o.interrupter = &stop;
-    return Outcome{computeSeparableVolumeField(grid, shell, true, o, [](SegmentBricks&&) {}).interrupted};
+  auto separablePoints = [&] {
+    const bench::PlannedField planned = plan(pointsRequest(false, 0, std::numeric_limits<double>::infinity()),
+                                             FieldAlgorithm::kSeparable);
+    return [&, planned](Interrupter& stop) {
+      SeedSource source;
+      source.points = &two_points;
+      bench::RunSettings settings;
+      settings.max_chunk_bricks = 1024;
+      settings.interrupter = &stop;
+      return Outcome{bench::runPlannedField(planned, source, settings, [](SegmentBricks&&) {}).result.interrupted};
+    };
   };
   int chunks_seen = 0;
   std::vector<Case> cases = {
@@ -154,17 +198,21 @@ int run(int argc, char** argv) {
       {"mesh seeds, parity (Embree)", meshSeeds(SignMethod::kParity)},
       {"engine, two points, full domain", engine(0, std::numeric_limits<double>::infinity(), 1024, {})},
       {"engine, two points, 8 segments", engine(n / 4.0, std::numeric_limits<double>::infinity(), 1024, {})},
-      {"sphere shell volume, limit 5 (seeds + engine)", shellBand},
+      {"sphere shell volume, limit 5, band (seeds + engine)", shellCase(true, 5)},
       {"emission (cancelled inside the k-th chunk)",
        engine(n / 16.0, std::numeric_limits<double>::infinity(), 1024,
               [&](const SegmentBricks&) { return --chunks_seen == 0; }),
        true},
-      {"separable point EDT, two points, full domain", separablePoints},
-      {"separable EDT, sphere shell volume (signed), full domain", separableShell},
+      {"separable point EDT, two points, full domain", separablePoints()},
+      {"separable EDT, sphere shell volume (signed), full domain", shellCase(false, std::numeric_limits<double>::infinity())},
   };
   const std::vector<std::string> short_names = {"seeds_pseudonormal", "seeds_winding", "seeds_parity", "points_full",
                                                 "points_segments", "shell_band", "emission", "separable_points",
                                                 "separable_shell"};
+  if (!plan_errors.empty()) {
+    for (const std::string& e : plan_errors) std::fprintf(stderr, "cancel_bench: FAIL planning: %s\n", e.c_str());
+    return bench::kExitWrong;
+  }
 
   std::string md =
       fmt::format("# cancel_bench ({}^3, {} threads, {} samples per case, reference runs capped at {} s; mesh {})\n\n",
@@ -228,7 +276,7 @@ int run(int argc, char** argv) {
   md += fmt::format("\nWorst compute stop: {:.1f} ms (goal: at most 100 ms); worst return with the state freed: {:.1f} ms.\n",
                     worst, worst_return);
   std::printf("\nWorst compute stop: %.1f ms; worst return: %.1f ms\n", worst, worst_return);
-  std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md;
+  if (!smoke) std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md;
   return worst <= 100 ? 0 : 3;
 }
 

@@ -1,16 +1,22 @@
 // edt_peer_bench: the engine against seung-lab edt (`binary_edt`, separable and threaded: the fastest public CPU
-// exact EDT) on the same seeds, in the same run — the table of issue 11.
+// exact EDT) on the same seeds, in the same run.
 //   * Cases: two points at 256³ and 512³, two seed voxels at 256³ and a sphere shell at 256³ and 512³ (full
 //     domain), a sphere shell and 40 random blobs at 512³ with a limit of 5 voxels. edt has no limit: it always computes the whole grid, which is what a
 //     limited query has to beat.
 //   * distband is timed engine only (seeds built before the clock starts, output bricks dropped), edt whole (it has
 //     no separate setup); each at the thread counts asked, medians of --reps runs, the peer in the same process.
-//   * Rows run with the algorithm the product picks (core's planner: the separable EDTs, core/separable/volume_edt.h for
-//     volumes and core/separable/point_edt.h for the two points) and, unless --compare-band false, again with the active
-//     band forced (what every volume and point query used before).
-//   * Accuracy: distband against edt's exact result on every delivered voxel (max error in voxels, % exact).
+//   * Every row is a FieldRequest planned and run as `distband compute` does (bench/planned_field.h): first as the
+//     product plans it (the separable EDTs, core/separable/volume_edt.h for volumes and core/separable/point_edt.h
+//     for the two points) and, unless --compare-band false, again with the band asked for through the request (an
+//     explicit cubic26 stencil: the propagation, with the product's defaults otherwise).
+//   * Reference: edt's exact result on every voxel (first repetition, when the peer runs).
+//   * Pass: every delivered voxel within 1e-4 voxel of edt's value (every case here is exact: points, and volumes
+//     with cubic26 without segments), every voxel within the limit delivered once, none beyond it; else the case,
+//     the grid and the first bad voxel are printed and the exit status is 1. --smoke runs every case at 32^3, once,
+//     on 2 threads.
 // The peer's header is read from ../shared/peers/edt (LGPL-3.0): it is built into this program, never copied into
 // the repository. Writes a Markdown table to stdout and, with --json, the rows to a file.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -25,11 +31,8 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/bench_util.h"
-#include "core/band/band_engine.h"
-#include "core/field/field_plan.h"
-#include "core/field/compute_field.h"
-#include "core/seeds/point_seeds.h"
-#include "core/seeds/volume_seeds.h"
+#include "bench/planned_field.h"
+#include "core/separable/point_edt.h"
 
 namespace distband {
 namespace {
@@ -78,16 +81,27 @@ double processCpuSeconds() {
   return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
 }
 
-Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool peer) {
+/// The case as a request: the product's plan, or with `band` the propagation asked for by its stencil.
+FieldRequest requestFor(const Case& c, bool band) {
+  FieldRequest request;
+  request.seeds = c.as_points ? SeedKind::kPoints : SeedKind::kVolume;
+  request.limit_world = c.limit_voxels;  // voxel size 1
+  if (c.as_points) request.point_layout = pointLayout(c.points(c.n));
+  if (band) request.stencil = StencilKind::kCubic26;
+  return request;
+}
+
+Row run(const Case& c, const bench::PlannedField& planned, int threads, int reps, bool peer, bench::Verdict& verdict) {
   const int n = c.n;
+  const Grid& grid = planned.grid;
   const std::vector<uint8_t> mask = c.mask(n);
-  const Grid grid({0, 0, 0}, 1.0, {n, n, n});
+  const std::vector<Vec3d> points = c.as_points ? c.points(n) : std::vector<Vec3d>{};
   Row row;
   row.name = c.name;
   row.n = n;
   row.threads = threads;
   row.limit_voxels = c.limit_voxels;
-  row.algorithm = std::string(algorithmName(algorithm));
+  row.algorithm = std::string(algorithmName(planned.plan.algorithm));
 
   // The peer: distance of every non-seed voxel to the nearest seed voxel (edt measures foreground to background).
   std::vector<uint8_t> foreground(mask.size());
@@ -106,27 +120,25 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool pee
   row.edt_s = peer ? median(edt_times) : NAN;
   row.edt_cpu_s = peer ? median(edt_cpu) : NAN;
 
+  SeedSource source;
+  source.points = &points;
+  source.mask = std::shared_ptr<const std::vector<uint8_t>>(&mask, [](const std::vector<uint8_t>*) {});
+  bench::RunSettings settings;
+  settings.threads = threads;
+  settings.max_chunk_bricks = 4096;
+  const std::string case_name = fmt::format("{} {}^3, {}, {} threads", c.name, n, row.algorithm, threads);
   std::vector<double> times, cpu;
   for (int r = 0; r < reps; ++r) {
-    FieldInputs inputs;
-    if (c.as_points) {
-      if (Status e = makePointSeeds(grid, c.points(n), &inputs.seeds); !e.ok()) throw std::runtime_error(e.toString());
-    } else if (algorithm == FieldAlgorithm::kBand) {
-      if (Status e = makeVolumeSeeds(grid, mask, false, &inputs.seeds); !e.ok())
-        throw std::runtime_error(e.toString());
-    } else {
-      inputs.mask = std::shared_ptr<const std::vector<uint8_t>>(&mask, [](const std::vector<uint8_t>*) {});
-    }
-    FieldPlan plan;  // the exact mode's plan with the algorithm under test
-    plan.seeds = c.as_points ? SeedKind::kPoints : SeedKind::kVolume;
-    plan.algorithm = algorithm;
-    FieldRunOptions o;
-    o.threads = threads;
-    o.limit_world = c.limit_voxels;
-    o.max_chunk_bricks = 4096;
-    int64_t exact_count = 0, voxels = 0;
+    FieldInputs inputs;  // built before the clock: the engine alone is timed
+    if (Status e = bench::buildPlannedInputs(planned, source, nullptr, &inputs); !e.ok())
+      throw std::runtime_error(e.toString());
+    int64_t exact_count = 0, voxels = 0, bad = 0, repeated = 0, outside = 0;
     double max_err = 0;
+    Coord first_bad{-1, -1, -1};
+    float first_bad_value = 0;
     const bool check = r == 0 && peer;
+    std::vector<uint8_t> delivered(check ? mask.size() : 0, 0);
+    const double limit = c.limit_voxels;
     const auto t0 = Clock::now();
     const double cpu0 = processCpuSeconds();
     double check_s = 0;
@@ -135,24 +147,50 @@ Row run(const Case& c, int threads, int reps, FieldAlgorithm algorithm, bool pee
       const auto c0 = Clock::now();
       for (const Brick& b : s.bricks)
         for (int i = 0; i < kBrickVoxels; ++i) {
+          if (!b.mask.test(i)) continue;
           const Coord v = b.origin + brickLocal(i);
-          if (!b.mask.test(i) || !grid.contains(v)) continue;
-          const double err = std::abs(double(b.values[i]) - exact[size_t(grid.denseIndex(v))]);
+          if (!grid.contains(v)) {
+            ++outside;
+            continue;
+          }
+          const size_t k = size_t(grid.denseIndex(v));
+          repeated += delivered[k]++ > 0;
+          const double err = std::abs(double(b.values[i]) - exact[k]);
           max_err = std::max(max_err, err);
           exact_count += err <= 1e-4;
+          if ((err > 1e-4 || exact[k] > limit * (1 + 1e-6)) && bad++ == 0) {
+            first_bad = v;
+            first_bad_value = b.values[i];
+          }
           ++voxels;
         }
       check_s += since(c0);
     };
-    const FieldRunResult result = computeField(plan, grid, std::move(inputs), o, consume);
+    const FieldRunResult result = bench::computePlanned(planned, std::move(inputs), settings, consume);
     times.push_back(since(t0) - check_s);
     cpu.push_back(processCpuSeconds() - cpu0 - check_s);
     row.voxels = result.voxels;
     if (check) {
-      if (voxels != result.voxels) throw std::runtime_error("the delivered bricks disagree with the engine's count");
       row.max_err_voxels = max_err;
       row.exact_fraction = voxels ? double(exact_count) / double(voxels) : 1.0;
       row.updates = result.updates;
+      if (bad)
+        verdict.fail(case_name, grid,
+                     fmt::format("{} voxels off by more than 1e-4 voxel or beyond the limit (max error {:.3g}); first at "
+                                 "({}, {}, {}): edt {:.9g}, got {:.9g}",
+                                 bad, max_err, first_bad.x, first_bad.y, first_bad.z,
+                                 exact[size_t(grid.denseIndex(first_bad))], first_bad_value));
+      if (repeated || outside)
+        verdict.fail(case_name, grid, fmt::format("{} voxels delivered twice, {} outside the grid", repeated, outside));
+      int64_t missing = 0;
+      Coord first_missing{-1, -1, -1};
+      for (size_t k = 0; k < exact.size(); ++k)
+        if (!delivered[k] && exact[k] < limit * (1 - 1e-6) && missing++ == 0)
+          first_missing = {int(k % size_t(n)), int(k / size_t(n) % size_t(n)), int(k / (size_t(n) * size_t(n)))};
+      if (missing)
+        verdict.fail(case_name, grid, fmt::format("{} voxels within the limit not delivered; first at ({}, {}, {}): "
+                                                  "edt {:.9g}", missing, first_missing.x, first_missing.y,
+                                                  first_missing.z, exact[size_t(grid.denseIndex(first_missing))]));
     }
   }
   row.distband_s = median(times);
@@ -177,9 +215,16 @@ int main(int argc, char** argv) {
   app.add_option("--compare-band", compare_band, "Full-domain rows: also run the band engine forced (slow at 512³)");
   bool peer = true;
   app.add_option("--peer", peer, "Run edt (and check against it); false: distband alone, e.g. under a profiler");
+  bool smoke = false;
+  app.add_flag("--smoke", smoke, "every case at 32^3, once, on 2 threads (the CTest run)");
   CLI11_PARSE(app, argc, argv);
+  if (smoke) {
+    threads = {2};
+    reps = 1;
+  }
+  bench::Verdict verdict("edt_peer_bench");
   const double inf = std::numeric_limits<double>::infinity();
-  const std::vector<Case> cases = {
+  std::vector<Case> cases = {
       {"two points (point seeds), full domain", 256, inf, twoVoxels, true},
       {"two points (point seeds), full domain", 512, inf, twoVoxels, true},
       {"two seed voxels, full domain", 256, inf, twoVoxels},
@@ -188,23 +233,37 @@ int main(int argc, char** argv) {
       {"sphere band, limit 5 voxels", 512, 5, bench::sphereShellMask},
       {"random blobs, limit 5 voxels", 512, 5, bench::randomBlobsMask},
   };
+  if (smoke) {  // one row per case name at 32^3
+    std::vector<Case> small;
+    for (Case c : cases)
+      if (std::none_of(small.begin(), small.end(), [&](const Case& s) { return s.name == c.name; })) {
+        c.n = 32;
+        small.push_back(c);
+      }
+    cases = small;
+  }
   std::printf("| case | grid | distband algorithm | threads | distband engine s | edt s | ratio | voxels delivered | ns per voxel per "
               "thread | updates per voxel | max err (voxel) | exact | distband CPU s | edt CPU s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   nlohmann::json rows = nlohmann::json::array();
   for (const Case& c : cases) {
     if (!only.empty() && c.name != only) continue;
-    // The product's choice (core's planner), then, for whole-grid rows, the band forced for comparison.
-    FieldRequest request;
-    request.seeds = c.as_points ? SeedKind::kPoints : SeedKind::kVolume;
-    request.limit_world = c.limit_voxels;
-    if (c.as_points) request.point_layout = pointLayout(c.points(c.n));
-    FieldPlan plan;
-    planField(request, Grid({0, 0, 0}, 1.0, {c.n, c.n, c.n}), nullptr, &plan);
-    std::vector<FieldAlgorithm> algorithms{plan.algorithm};
-    if (plan.algorithm != FieldAlgorithm::kBand && compare_band) algorithms.push_back(FieldAlgorithm::kBand);
-    for (FieldAlgorithm algorithm : algorithms)
+    // The product's plan, then, where it is not the band, the band asked for by the request.
+    const Grid grid({0, 0, 0}, 1.0, {c.n, c.n, c.n});
+    std::vector<bench::PlannedField> plans(1);
+    if (Status e = bench::planGridField(requestFor(c, false), grid, &plans[0]); !e.ok()) {
+      verdict.fail(c.name, grid, "planning: " + e.toString());
+      continue;
+    }
+    if (plans[0].plan.algorithm != FieldAlgorithm::kBand && compare_band) {
+      plans.emplace_back();
+      if (Status e = bench::planGridField(requestFor(c, true), grid, &plans[1]); !e.ok()) {
+        verdict.fail(c.name, grid, "planning the band: " + e.toString());
+        continue;
+      }
+    }
+    for (const bench::PlannedField& planned : plans)
     for (int t : threads) {
-      const Row r = run(c, t, reps, algorithm, peer);
+      const Row r = run(c, planned, t, reps, peer, verdict);
       std::printf("| %s | %d³ | %s | %d | %.3f | %.3f | %.2f | %lld | %.0f | %.2f | %.3f | %.2f %% | %.3f | %.3f |\n", r.name.c_str(), r.n,
                   r.algorithm.c_str(), r.threads, r.distband_s, r.edt_s, r.distband_s / r.edt_s, (long long)r.voxels,
                   1e9 * r.distband_s * r.threads / double(std::max<int64_t>(1, r.voxels)),
@@ -220,5 +279,5 @@ int main(int argc, char** argv) {
     }
   }
   if (!json_path.empty()) std::ofstream(json_path) << rows.dump(2) << "\n";
-  return 0;
+  return verdict.finish();
 }

@@ -1,21 +1,27 @@
-// engine_bench: the engine benchmark of issue 2 §4 — the SMI 2009 paper's mesh-free Table 1 rows, its Fig. 7,
-// random points, seed volumes and the sparse-memory case, each against an exact oracle and against scipy's
-// exact EDT (the peer) timed in the same run.
+// engine_bench: the SMI 2009 paper's mesh-free Table 1 rows, its Fig. 7, random points, seed volumes and the
+// sparse-memory case, each against an exact oracle and against scipy's exact EDT (the peer) timed in the same run.
 //
 // Contract:
 //   * Driver mode (no --case): builds the list of rows, runs scipy once per distinct input (bench/scipy_edt.py
 //     as a subprocess) and every row in its own child process (this binary with --case ..., under
 //     /usr/bin/time -v when present), so each row's peak RSS is its own. Writes <out-dir>/<tag>.json (one object
 //     per row) and <out-dir>/<tag>.md, rewritten after every row so an interrupted run keeps what it measured.
+//     Exits 1 when any row failed its check or could not run, after listing them.
 //   * Case mode (--case NAME --res N ...): runs one row in this process and prints one JSON line on stdout.
-//     The timed region of a repetition is: build the Seeds from the input, allocate the output, run
-//     computeBandField with a callback that consumes every delivered brick (a DenseField, or for the
-//     memory case an analytic check that keeps nothing). peak_rss_mb is getrusage's high-water mark taken
-//     right after the timed repetitions, before any oracle is built.
+//     Each row is a FieldRequest (its stencil, mode, segment length and limit; the explicit stencil asks for the
+//     band) planned and run as `distband compute` plans it (bench/planned_field.h). The timed region of a
+//     repetition is: build the inputs (buildFieldInputs), allocate the output, run computeField with a callback that
+//     consumes every delivered brick (a DenseField, or for the memory case an analytic check that keeps nothing).
+//     The memory case's seeds are custom (one off-lattice site per band voxel: no request expresses them), run with
+//     the plan of the same request. peak_rss_mb is getrusage's high-water mark taken right after the timed
+//     repetitions, before any oracle is built.
 //   * Errors are in voxels, against an oracle sharing no code with the engine: brute force over the point list,
-//     an exact separable EDT (Felzenszwalb–Huttenlocher) for volumes, the analytic sphere for the memory case.
-//     The output format is float32, so the reference is the exact double rounded to float32 (the best float
-//     answer); frac_off counts voxels off by more than 1e-4 voxel.
+//     an exact separable EDT (Felzenszwalb–Huttenlocher) for volumes, the exact distance to the seed sites for the
+//     memory case. The output format is float32, so the reference is the exact double rounded to float32 (the best
+//     float answer); frac_off counts voxels off by more than 1e-4 voxel.
+//   * Pass (errorBound): max error within the row's documented bound, every voxel within the limit delivered, once,
+//     none beyond it; else the row prints its JSON with "pass": false and the worst voxel, and exits 1.
+//   * --smoke: every input at 32^3 (the memory case at 64^3), two stencils, both modes, once (the CTest run).
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -44,16 +50,16 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
-#include "core/io/dense_field.h"
 #include "core/band/band_engine.h"
 #include "core/grid.h"
+#include "core/io/dense_field.h"
 #include "core/io/npy.h"
 #include "core/seeds/seeds.h"
-#include "core/seeds/point_seeds.h"
-#include "core/seeds/volume_seeds.h"
+#include "core/separable/point_edt.h"
 #include "core/stencil.h"
 
 #include "bench/bench_util.h"
+#include "bench/planned_field.h"
 #include "tests/support/exact_edt.h"
 
 namespace distband {
@@ -312,6 +318,19 @@ struct CaseSpec {
   int reps = 3;
 };
 
+/// The largest error (voxels, against the exact distance rounded to float32) the docs state for a row
+/// (docs/algorithm.md section 5, docs/benchmarks.md): exact mode is exact for points and the random blobs with every
+/// stencil, with and without segments; the sphere shell is within 0.04 (0.028-0.035 measured at 256^3); the memory
+/// case's dense off-lattice sites within 0.07 (0.065). Paper mode: points within 0.1 (0.094), volumes within 0.35
+/// (0.33), the memory case within 0.2 (0.17).
+double errorBound(const CaseSpec& s) {
+  const bool exact = s.mode == "exact";
+  if (s.kase == "sphere_band") return exact ? 0.07 : 0.2;
+  if (isPointCase(s.kase)) return exact ? kOffTolerance : 0.1;
+  if (s.kase == "random_blobs") return exact ? kOffTolerance : 0.35;
+  return exact ? 0.04 : 0.35;
+}
+
 int runCase(const CaseSpec& spec) {
   const std::optional<StencilKind> stencil = parseStencil(spec.stencil);
   PropagationMode mode;
@@ -320,21 +339,37 @@ int runCase(const CaseSpec& spec) {
     return 2;
   }
   const int n = spec.res;
-  const Grid grid({0, 0, 0}, 1.0, {n, n, n});
-  BandOptions opt;
-  opt.stencil = *stencil;
-  opt.mode = mode;
-  opt.segment_length_world = spec.segment;
-  opt.limit_world = spec.limit;
-  opt.threads = spec.threads;
-  if (Status why = validateBandOptions(grid, opt); !why.ok()) {
-    std::cerr << "invalid options: " << why.toString() << "\n";
-    return 2;
-  }
   const bool memory_case = spec.kase == "sphere_band";
   const Sphere sphere = benchSphere(n);
   Input input;
   if (!memory_case) input = makeInput(spec.kase, n);
+  // The row as a request, planned as `distband compute` plans it; the explicit stencil asks for the band.
+  FieldRequest request;
+  request.seeds = input.volume ? SeedKind::kVolume : SeedKind::kPoints;
+  request.stencil = *stencil;
+  request.mode = mode;
+  request.segment_length_world = spec.segment;  // voxel size 1: world units are voxels
+  request.limit_world = spec.limit;
+  if (!input.volume && !memory_case) request.point_layout = pointLayout(input.points);
+  bench::PlannedField planned;
+  if (Status why = bench::planGridField(request, Grid({0, 0, 0}, 1.0, {n, n, n}), &planned); !why.ok()) {
+    std::cerr << "invalid request: " << why.toString() << "\n";
+    return 2;
+  }
+  const Grid& grid = planned.grid;
+  if (Status why = validateRunOptions(grid, planned.plan.runOptions()); !why.ok()) {
+    std::cerr << "invalid options: " << why.toString() << "\n";
+    return 2;
+  }
+  if (planned.plan.algorithm != FieldAlgorithm::kBand) {
+    std::cerr << "the planner does not run the band for an explicit stencil\n";
+    return bench::kExitWrong;
+  }
+  SeedSource source;
+  source.points = &input.points;
+  source.mask = std::shared_ptr<const std::vector<uint8_t>>(&input.mask, [](const std::vector<uint8_t>*) {});
+  bench::RunSettings settings;
+  settings.threads = spec.threads;
 
   std::vector<double> times;
   FieldRunResult last;
@@ -342,6 +377,7 @@ int runCase(const CaseSpec& spec) {
   ErrorStats analytic;       // memory case: checked inside the callback, nothing kept ...
   std::vector<std::pair<Coord, float>> sample;  // ... but a 1-in-64 sample for the exact site-set check
   size_t band_voxels = 0, max_segment_bricks = 0;
+  int64_t written = 0;  // dense cases: voxel writes of the last repetition, repeats included
   for (int rep = 0; rep < spec.reps; ++rep) {
     field.clear();
     field.shrink_to_fit();
@@ -349,23 +385,18 @@ int runCase(const CaseSpec& spec) {
     sample.clear();
     max_segment_bricks = 0;
     const auto t0 = std::chrono::steady_clock::now();
-    Seeds seeds;
-    Status err;
+    FieldInputs inputs;
     if (memory_case) {
-      seeds = sphereBandSeeds(n, sphere);
-    } else if (input.volume) {
-      err = makeVolumeSeeds(grid, input.mask, false, &seeds);
-    } else {
-      err = makePointSeeds(grid, input.points, &seeds);
-    }
-    if (!err.ok()) {
+      // No request expresses these seeds (one site per band voxel, off the lattice): the plan's run on custom inputs.
+      inputs.seeds = sphereBandSeeds(n, sphere);
+    } else if (Status err = bench::buildPlannedInputs(planned, source, nullptr, &inputs); !err.ok()) {
       std::cerr << "seeds: " << err.toString() << "\n";
       return 1;
     }
-    band_voxels = seeds.band.size();
+    band_voxels = inputs.seeds.band.size();
     std::optional<DenseField> dense;
     if (!memory_case) dense.emplace(grid, kUndelivered);
-    last = computeBandField(grid, seeds, opt, [&](SegmentBricks&& seg) {
+    last = bench::computePlanned(planned, std::move(inputs), settings, [&](SegmentBricks&& seg) {
       max_segment_bricks = std::max(max_segment_bricks, seg.bricks.size());
       if (dense) {
         dense->add(seg);
@@ -381,7 +412,10 @@ int runCase(const CaseSpec& spec) {
         }
     });
     times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    if (dense) field = std::move(dense->values());
+    if (dense) {
+      written = dense->written();
+      field = std::move(dense->values());
+    }
   }
   const double rss = peakRssMb();
 
@@ -464,7 +498,28 @@ int runCase(const CaseSpec& spec) {
   row["missing"] = st.missing;
   row["beyond_limit"] = st.beyond_limit;
   row["delivered_unique"] = memory_case ? analytic.delivered : st.delivered;
+  // Pass/fail against the bound the docs state for this row.
+  const double bound = errorBound(spec);
+  std::string failure;
+  if (st.max_err > bound)
+    failure = fmt::format("max error {:.6g} voxel over the bound {:g}; worst voxel ({}, {}, {}): exact {:.9g}, got {:.9g}",
+                          st.max_err, bound, st.worst.x, st.worst.y, st.worst.z, st.worst_exact, st.worst_value);
+  else if (st.missing || st.beyond_limit)
+    failure = fmt::format("{} voxels within the limit not delivered, {} delivered beyond it", st.missing,
+                          st.beyond_limit);
+  else if (!memory_case && written != st.delivered)
+    failure = fmt::format("{} voxel deliveries for {} voxels: some came more than once", written, st.delivered);
+  else if (memory_case && analytic.delivered != last.voxels)
+    failure = fmt::format("the run reports {} voxels, {} were delivered", last.voxels, analytic.delivered);
+  row["bound_vox"] = bound;
+  row["pass"] = failure.empty();
+  if (!failure.empty()) row["failure"] = failure;
   std::cout << row.dump() << std::endl;
+  if (!failure.empty()) {
+    std::cerr << fmt::format("engine_bench: FAIL {} {}^3 {} {} seg={} limit={}: {}\n", spec.kase, n, spec.stencil,
+                             spec.mode, spec.segment, spec.limit, failure);
+    return bench::kExitWrong;
+  }
   return 0;
 }
 
@@ -490,6 +545,7 @@ std::vector<std::string> splitList(const std::string& s) {
 
 struct DriverOptions {
   bool quick = false;
+  bool smoke = false;  // the CTest run: tiny rows, results in the temporary directory unless --out-dir is given
   int reps = 3;
   int big_reps = -1;  // repetitions for rows at 256^3 and above; < 0: same as reps
   int threads = 2;
@@ -522,6 +578,17 @@ std::vector<Row> planRows(const DriverOptions& o) {
     index[key] = rows.size();
     rows.push_back({s, {group}});
   };
+  if (o.smoke) {  // every input at 32^3 (the memory case at 64^3), two stencils, both modes: a few seconds
+    for (const char* kase : {"one_point", "two_points", "random100", "sphere_shell", "random_blobs"})
+      for (const char* st : {"cubic26", "fcc12"})
+        for (const char* m : {"exact", "paper"})
+          for (double seg : {0.0, 8.0}) {
+            if (isVolumeCase(kase) && seg > 0 && std::string(st) != "cubic26") continue;
+            add("smoke", {kase, 32, st, m, seg});
+          }
+    for (const char* m : {"exact", "paper"}) add("smoke", {"sphere_band", 64, "cubic26", m, 0.0, 5.0});
+    return rows;
+  }
   if (want("table1"))  // the paper's Table 1, mesh-free rows: with segment (l_seg = 20) and without
     for (const char* kase : {"one_point", "two_points"})
       for (int res : table_res)
@@ -593,8 +660,8 @@ std::string fmtErr(const json& v) {
 
 std::string markdownTable(const std::vector<json>& rows, const std::string& group) {
   std::string md =
-      "| case | res | stencil | mode | l_seg | limit | thr | time_s | peer_s | ratio | max_err | mean_err | "
-      "frac_off | rss_mb |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+      "| case | res | stencil | mode | l_seg | limit | thr | time_s | peer_s | ratio | max_err | bound | mean_err | "
+      "frac_off | rss_mb | pass |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const json& r : rows) {
     if (std::find(r["groups"].begin(), r["groups"].end(), group) == r["groups"].end()) continue;
     if (r.contains("error")) {
@@ -604,12 +671,13 @@ std::string markdownTable(const std::vector<json>& rows, const std::string& grou
                         r["error"].get<std::string>());
       continue;
     }
-    md += fmt::format("| {} | {}³ | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+    md += fmt::format("| {} | {}³ | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:g} | {} | {} | {} | {} |\n",
                       r["case"].get<std::string>(), r["resolution"].get<int>(), r["stencil"].get<std::string>(),
                       r["mode"].get<std::string>(), fmtNum(r["segment"], "{:g}"), fmtNum(r["limit"], "{:g}"),
                       r["threads"].get<int>(), fmtNum(r["time_s"]), fmtNum(r["peer_time_s"]),
-                      fmtNum(r["ratio"], "{:.2f}"), fmtErr(r["max_err_vox"]), fmtErr(r["mean_err_vox"]),
-                      fmtErr(r["frac_off"]), fmtNum(r["peak_rss_mb"], "{:.0f}"));
+                      fmtNum(r["ratio"], "{:.2f}"), fmtErr(r["max_err_vox"]), r.value("bound_vox", 0.0),
+                      fmtErr(r["mean_err_vox"]), fmtErr(r["frac_off"]), fmtNum(r["peak_rss_mb"], "{:.0f}"),
+                      r.value("pass", false) ? "yes" : "**NO**");
   }
   return md;
 }
@@ -683,13 +751,15 @@ void writeOutputs(const DriverOptions& o, const std::vector<json>& rows, const j
   md += "- errors in voxels vs an exact oracle, against the exact value rounded to float32 (the output type): points: "
         "brute force over the points; volumes: exact EDT (Felzenszwalb-Huttenlocher); sphere_band: exact distance to "
         "the seed sites on a 1-in-64 voxel sample (its distance to the true sphere is reported apart); frac_off = "
-        "fraction of voxels off by > 1e-4 voxel; time_s includes building the seeds and consuming the bricks\n\n";
+        "fraction of voxels off by > 1e-4 voxel; time_s includes building the seeds and consuming the bricks; pass: "
+        "max_err within the row's bound (bench/README.md), every voxel within the limit delivered once, none beyond\n\n";
   const std::vector<std::pair<std::string, std::string>> sections = {
       {"table1", "Table 1 (mesh-free rows): one and two points, with (l_seg = 20) and without segments"},
       {"fig7", "Fig. 7: time vs segment length (10, 20, 40, none)"},
       {"random", "100 random points"},
       {"volume", "Seed volumes (unsigned distance to the mask, as scipy's edt(mask == 0))"},
-      {"memory", "Memory case: limit 5 voxels around a sphere of radius 25/64·n"}};
+      {"memory", "Memory case: limit 5 voxels around a sphere of radius 25/64·n"},
+      {"smoke", "Smoke rows (every input, tiny)"}};
   for (const auto& [g, title] : sections) {
     bool any = false;
     for (const json& r : rows)
@@ -709,7 +779,7 @@ std::string shellQuote(const std::string& s) {
 }
 
 int runDriver(DriverOptions o) {
-  if (o.tag.empty()) o.tag = o.quick ? "engine_bench_quick" : "engine_bench";
+  if (o.tag.empty()) o.tag = o.smoke ? "engine_bench_smoke" : o.quick ? "engine_bench_quick" : "engine_bench";
   const std::vector<Row> rows = planRows(o);
   if (rows.empty()) {
     std::cerr << "no rows selected (check --groups, --stencils, --modes)\n";
@@ -754,6 +824,7 @@ int runDriver(DriverOptions o) {
 
   std::map<std::string, json> peer_cache;  // (case, res) -> scipy result
   std::vector<json> results;
+  std::vector<std::string> failures;
   for (size_t k = 0; k < rows.size(); ++k) {
     const CaseSpec& s = rows[k].spec;
     // The peer, once per distinct input.
@@ -789,8 +860,9 @@ int runDriver(DriverOptions o) {
                                   s.threads, s.reps, err_file);
     if (have_time) cmd = fmt::format("/usr/bin/time -v -o {} {}", rss_file, cmd);
     auto [out, rc] = runCommand(cmd);
-    json row = rc == 0 ? json::parse(lastLine(out), nullptr, false) : json();
-    if (rc != 0 || row.is_discarded() || !row.is_object()) {
+    // A row that ran but failed its check exits kExitWrong after printing its JSON (with "pass": false).
+    json row = rc == 0 || rc == bench::kExitWrong ? json::parse(lastLine(out), nullptr, false) : json();
+    if (row.is_discarded() || !row.is_object() || !row.contains("pass")) {
       row = json{{"case", s.kase},     {"resolution", s.res},
                  {"stencil", s.stencil}, {"mode", s.mode},
                  {"segment", s.segment > 0 ? json(s.segment) : json(nullptr)},
@@ -811,19 +883,32 @@ int runDriver(DriverOptions o) {
       row["peer_time_s"] = nullptr;
       row["ratio"] = nullptr;
     }
-    std::cerr << fmt::format("[{}/{}] {} {}³ {} {} seg={} limit={}: {}\n", k + 1, rows.size(), s.kase, s.res,
+    const bool passed = !row.contains("error") && row.value("pass", false);
+    if (!passed)
+      failures.push_back(fmt::format("{} {}³ {} {} seg={} limit={}: {}", s.kase, s.res, s.stencil, s.mode, s.segment,
+                                     s.limit, row.contains("error") ? row["error"].get<std::string>()
+                                                                    : row.value("failure", std::string("failed"))));
+    std::cerr << fmt::format("[{}/{}] {} {}³ {} {} seg={} limit={}: {}{}\n", k + 1, rows.size(), s.kase, s.res,
                              s.stencil, s.mode, s.segment, s.limit,
                              row.contains("error")
                                  ? row["error"].get<std::string>()
-                                 : fmt::format("{:.3f} s (peer {}), max_err {:.3g}, frac_off {:.3g}, rss {:.0f} MB",
+                                 : fmt::format("{:.3f} s (peer {}), max_err {:.3g} (bound {:g}), frac_off {:.3g}, rss "
+                                               "{:.0f} MB",
                                                row["time_s"].get<double>(), fmtNum(row["peer_time_s"]),
-                                               row["max_err_vox"].get<double>(), row["frac_off"].get<double>(),
-                                               row["peak_rss_mb"].get<double>()));
+                                               row["max_err_vox"].get<double>(), row["bound_vox"].get<double>(),
+                                               row["frac_off"].get<double>(), row["peak_rss_mb"].get<double>()),
+                             passed ? "" : " FAIL");
     results.push_back(row);
     writeOutputs(o, results, meta);
   }
   std::filesystem::remove_all(tmp, ec);
   std::cerr << fmt::format("wrote {}/{}.json and {}/{}.md\n", o.out_dir, o.tag, o.out_dir, o.tag);
+  if (!failures.empty()) {
+    for (const std::string& f : failures) std::cerr << "engine_bench: FAIL " << f << "\n";
+    std::cerr << fmt::format("engine_bench: {} of {} rows failed\n", failures.size(), rows.size());
+    return bench::kExitWrong;
+  }
+  std::cerr << fmt::format("engine_bench: PASS ({} rows, each within its bound)\n", rows.size());
   return 0;
 }
 
@@ -838,11 +923,13 @@ int main(int argc, char** argv) {
   CaseSpec c;
   std::string limit = "inf";
   app.add_flag("--quick", o.quick, "a small subset (64^3 rows, the 256^3 memory row)");
+  app.add_flag("--smoke", o.smoke, "every input at 32^3 (memory case 64^3), reps 1; results go to the temporary "
+                                   "directory unless --out-dir is given (the CTest run)");
   app.add_option("--reps,-R", o.reps, "repetitions per row; the median time is reported")->check(CLI::Range(1, 100));
   app.add_option("--big-reps", o.big_reps, "repetitions for rows at 256^3 and above (default: --reps)")
       ->check(CLI::Range(1, 100));
   app.add_option("--threads", o.threads, "engine threads (BandOptions.threads)")->check(CLI::Range(1, 256));
-  app.add_option("--out-dir", o.out_dir, "where <tag>.json and <tag>.md are written");
+  auto* out_dir_opt = app.add_option("--out-dir", o.out_dir, "where <tag>.json and <tag>.md are written");
   app.add_option("--tag", o.tag, "output file name stem (default engine_bench or engine_bench_quick)");
   app.add_option("--python", o.python, "python interpreter with numpy and scipy");
   app.add_option("--scipy-script", o.scipy_script, "the peer script");
@@ -874,6 +961,10 @@ int main(int argc, char** argv) {
       std::cerr << "unknown mode '" << m << "'\n";
       return 2;
     }
+  }
+  if (o.smoke) {
+    o.reps = 1;
+    if (out_dir_opt->count() == 0) o.out_dir = std::filesystem::temp_directory_path().string();
   }
   if (case_opt->count() == 0) return runDriver(o);
   if (!isKnownCase(c.kase)) {

@@ -1,15 +1,19 @@
 // hostile_load: the server under a hostile mix of clients, on loopback, bounded in time (not a timed test).
-//   * 64 concurrent "maximal" queries: each asks for as much as the server would admit alone (a full-domain field
-//     whose estimate is about 40 % of the request budget), retrying after RESOURCE_EXHAUSTED; some are cancelled by
-//     their client at a random moment;
-//   * 20 stalled uploads (a first chunk, then silence) and 8 clients that never read their query's stream, each
-//     replaced as soon as the server gives up on it;
+//   * --maximal-clients (64) concurrent "maximal" queries: each asks for as much as the server would admit alone (a
+//     full-domain field whose estimate is about 40 % of the request budget), retrying after RESOURCE_EXHAUSTED; some
+//     are cancelled by their client at a random moment;
+//   * --stalled-clients (20) stalled uploads (a first chunk, then silence) and --silent-clients (8) clients that never
+//     read their query's stream, each replaced as soon as the server gives up on it;
 //   * a SIGTERM at 80 % of the run (the server drains for --grace-seconds, then exits).
-// It samples the server's RSS and threads from /proc, counts statuses, reads the server's log for how long each
-// cancelled query's engine ran after the cancel was seen, and checks that every completed query's field is
-// bit-identical to the in-process result of the same request.
+// It samples the server's RSS and threads from /proc, counts statuses, and reads the server's log for how long each
+// cancelled query's engine ran after the cancel was seen.
+// Reference: each query kind resolved and computed by the server's own path in this process (bench/server_reference.h).
+// Pass: every completed maximal query's field is bit-identical to its reference (else exit 1, naming the kind, the
+// grid and the first differing voxel), at least one completed; goals (exit 3): peak RSS <= 1.10 x the budget, exit
+// code 0 after the SIGTERM. --smoke: 5 s, a 192 MiB budget, queries of at most 80^3, 6 + 2 + 2 clients.
 //
 //   build/bench/hostile_load [--seconds 40] [--memory-budget-mib 1536] [--threads 2] [--max-queries 4] [--tag NAME]
+//                            [--smoke]
 #include <signal.h>
 
 #include <algorithm>
@@ -33,9 +37,8 @@
 
 #include "bench/bench_util.h"
 #include "client/remote_client.h"
-#include "core/field/compute_field.h"
-#include "core/io/dense_field.h"
-#include "core/band/band_engine.h"
+#include "bench/planned_field.h"
+#include "bench/server_reference.h"
 #include "server/memory_budget.h"
 #include "server/request_validation.h"
 #include "tests/support/child_server.h"
@@ -45,33 +48,18 @@ namespace distband {
 namespace {
 
 using bench::Clock;
+using bench::DeliveredField;
 using bench::since;
 
 v1::QueryRequest pointQuery(int n, std::vector<Vec3d> points, double limit) {
   return pointsRequest(points, {n, n, n}, 1.0, n / 4.0, limit);
 }
 
-/// The field the server must stream for `request`, computed in this process the way the server does.
-std::vector<float> referenceField(const v1::QueryRequest& request, int threads) {
-  ServerOptions options;
-  AssetCache cache(1 << 20);
-  ResolvedQuery q;
-  if (!resolveQuery(request, options, cache, nullptr, &q).ok()) return {};
-  SeedSource source;
-  source.points = &q.points;
-  FieldInputs inputs;
-  if (!buildFieldInputs(q.plan, q.grid, nullptr, source, nullptr, &inputs).ok()) return {};
-  DenseField field(q.grid, float(q.plan.limit_world));
-  FieldRunOptions run = q.plan.runOptions();
-  run.threads = threads;
-  computeField(q.plan, q.grid, std::move(inputs), run, [&](SegmentBricks&& s) { field.add(s); });
-  return std::move(field.values());
-}
-
 struct Tally {
   std::mutex mu;
   std::map<std::string, std::map<std::string, int>> by_kind;  // kind -> status -> count
   int compared = 0, identical = 0;
+  std::string first_mismatch;  // what the first wrong field was (bench/planned_field.h's description)
   void add(const std::string& kind, grpc::StatusCode code) {
     static const char* names[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT", "DEADLINE_EXCEEDED", "NOT_FOUND",
                                   "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
@@ -85,6 +73,8 @@ struct Tally {
 int run(int argc, char** argv) {
   double seconds = 40;
   int budget_mib = 1536, threads = 2, max_queries = 4;
+  int maximal_clients = 64, stalled_clients = 20, silent_clients = 8, max_size = 1024;
+  bool smoke = false;
   std::string tag = "hostile_load", server_log;
   CLI::App app{"hostile_load: the server under stalled, non-reading, cancelling and oversized clients"};
   app.add_option("--seconds", seconds, "length of the run (SIGTERM at 80 %)")->capture_default_str();
@@ -93,7 +83,21 @@ int run(int argc, char** argv) {
   app.add_option("--max-queries", max_queries, "the server's --max-queries")->capture_default_str();
   app.add_option("--tag", tag, "output name under bench/results/");
   app.add_option("--server-log", server_log, "write the server's log to this file");
+  app.add_option("--maximal-clients", maximal_clients, "clients sending maximal queries")->capture_default_str();
+  app.add_option("--stalled-clients", stalled_clients, "clients stalling uploads")->capture_default_str();
+  app.add_option("--silent-clients", silent_clients, "clients that never read their stream")->capture_default_str();
+  app.add_flag("--smoke", smoke,
+               "a few seconds at a small budget with few clients (the CTest run); writes no results file");
   CLI11_PARSE(app, argc, argv);
+  if (smoke) {
+    seconds = 5;
+    budget_mib = 192;
+    maximal_clients = 6;
+    stalled_clients = 2;
+    silent_clients = 2;
+    max_size = 80;
+  }
+  bench::Verdict verdict("hostile_load");
 
   const double idle_timeout = 3, grace = 3;
   ChildServer server(DISTBAND_SERVER_BIN,
@@ -109,13 +113,13 @@ int run(int argc, char** argv) {
   if (!info_client.info(&info).ok()) return 1;
   // A "maximal" query: the largest cube whose estimate fits about 40 % of the request budget (so at most two run at
   // once), found by asking the server's own estimate.
+  bench::ServerReference reference;
   int n = 64;
-  for (int m = 64; m <= 1024; m += 16) {
-    ServerOptions o;
-    AssetCache cache(1 << 20);
+  for (int m = 64; m <= max_size; m += 16) {
     ResolvedQuery q;
-    if (!resolveQuery(pointQuery(m, {{m * 0.3, m * 0.4, m * 0.5}}, 0), o, cache, nullptr, &q).ok()) break;
-    if (double(q.memory.total() + o.stream_buffer_bytes) > 0.4 * double(info.memory_budget_bytes())) break;
+    if (!reference.resolve(pointQuery(m, {{m * 0.3, m * 0.4, m * 0.5}}, 0), &q).ok()) break;
+    if (double(q.memory.total() + reference.options().stream_buffer_bytes) > 0.4 * double(info.memory_budget_bytes()))
+      break;
     n = m;
   }
   const std::vector<v1::QueryRequest> kinds = {
@@ -125,8 +129,13 @@ int run(int argc, char** argv) {
   };
   std::printf("maximal query: %d^3 voxels (request budget %s); computing %zu references...\n", n,
               humanBytes(info.memory_budget_bytes()).c_str(), kinds.size());
-  std::vector<std::vector<float>> references;
-  for (const auto& k : kinds) references.push_back(referenceField(k, threads));
+  // References: each kind resolved and computed by the server's own path in this process.
+  std::vector<DeliveredField> references(kinds.size());
+  for (size_t k = 0; k < kinds.size(); ++k)
+    if (Status s = reference.field(kinds[k], threads, &references[k]); !s.ok()) {
+      verdict.fail(fmt::format("kind {}", k), "the reference cannot be computed: " + s.toString());
+      return verdict.finish();
+    }
 
   std::atomic<bool> stop{false};      // the run is over: every client returns
   std::atomic<bool> draining{false};  // SIGTERM was sent: clients finish their current call and start no new one
@@ -140,8 +149,8 @@ int run(int argc, char** argv) {
   });
   Tally tally;
   std::vector<std::thread> clients;
-  // 64 maximal queries, some cancelled at random.
-  for (int c = 0; c < 64; ++c)
+  // Maximal queries, some cancelled at random.
+  for (int c = 0; c < maximal_clients; ++c)
     clients.emplace_back([&, c] {
       std::mt19937 rng(uint32_t(c) * 7919u + 1);
       RemoteClient client(server.target());
@@ -149,12 +158,12 @@ int run(int argc, char** argv) {
         const size_t k = rng() % kinds.size();
         const bool cancel = rng() % 4 == 0;
         const double cancel_after = std::uniform_real_distribution<double>(0.05, 2.0)(rng);
-        DenseField* field = nullptr;
-        std::unique_ptr<DenseField> owned;
+        DeliveredField* field = nullptr;
+        std::unique_ptr<DeliveredField> owned;
         const auto start = Clock::now();
         RemoteQueryCallbacks cb;
-        cb.on_header = [&](const Grid& g, const v1::QueryHeader& h) {
-          owned = std::make_unique<DenseField>(g, float(h.limit()));
+        cb.on_header = [&](const Grid& g, const v1::QueryHeader&) {
+          owned = std::make_unique<DeliveredField>(g);
           field = owned.get();
           return true;
         };
@@ -165,15 +174,19 @@ int run(int argc, char** argv) {
         RemoteQueryResult r = client.query(kinds[k], cb);
         tally.add(cancel ? "maximal query (client cancels)" : "maximal query", r.status.error_code());
         if (r.status.ok() && field) {
+          const bench::FieldDiff d = bench::compareFields(references[k], *field, bench::FieldTolerance::exact());
           std::lock_guard lock(tally.mu);
           ++tally.compared;
-          tally.identical += field->values() == references[k];
+          tally.identical += d.ok;
+          if (!d.ok && tally.first_mismatch.empty())
+            tally.first_mismatch = fmt::format("kind {} [{}]: {}", k, bench::gridText(references[k].grid()),
+                                               d.describe());
         }
         if (!r.status.ok()) std::this_thread::sleep_for(std::chrono::milliseconds(50 + rng() % 200));
       }
     });
-  // 20 stalled uploads.
-  for (int c = 0; c < 20; ++c)
+  // Stalled uploads.
+  for (int c = 0; c < stalled_clients; ++c)
     clients.emplace_back([&] {
       auto stub = v1::DistanceField::NewStub(grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials()));
       while (!draining) {
@@ -190,8 +203,8 @@ int run(int argc, char** argv) {
         if (code == grpc::StatusCode::RESOURCE_EXHAUSTED) std::this_thread::sleep_for(std::chrono::milliseconds(100));
       }
     });
-  // 8 clients that never read.
-  for (int c = 0; c < 8; ++c)
+  // Clients that never read.
+  for (int c = 0; c < silent_clients; ++c)
     clients.emplace_back([&] {
       auto stub = v1::DistanceField::NewStub(grpc::CreateChannel(server.target(), grpc::InsecureChannelCredentials()));
       while (!draining) {
@@ -248,9 +261,17 @@ int run(int argc, char** argv) {
     md += fmt::format("| {} | {} |\n", kind, c);
   }
   std::printf("%s", md.c_str());
-  std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md;
-  const bool ok = peak_rss_kb * 1024.0 <= 1.1 * budget && tally.identical == tally.compared && exit_code == 0;
-  return ok ? 0 : 3;
+  if (!smoke) std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md;
+  if (tally.compared == 0) verdict.fail("maximal queries", "none completed, so none was checked");
+  if (tally.identical != tally.compared)
+    verdict.fail("maximal queries", fmt::format("{} of {} completed queries differ from the reference; first: {}",
+                                                tally.compared - tally.identical, tally.compared, tally.first_mismatch));
+  const int verdict_status = verdict.finish();
+  if (verdict_status != 0) return verdict_status;
+  // The service's goals: memory within the budget, a clean exit after SIGTERM.
+  const bool goals = peak_rss_kb * 1024.0 <= 1.1 * budget && exit_code == 0;
+  if (!goals) std::fprintf(stderr, "hostile_load: a goal was missed (peak RSS <= 1.10 x budget, exit code 0)\n");
+  return goals ? 0 : 3;
 }
 
 }  // namespace

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """serial_fraction.py: Amdahl's serial fraction of a 1-thread run, from a frame-pointer perf profile.
 
-Issue 11's goal 3 asks for >= 12x from 1 to 16 threads; without a 16-core machine the argument is a profile. This
+The scaling goal is >= 12x from 1 to 16 threads; without a 16-core machine the argument is a profile. This
 reads `perf script` output of a 1-thread run of a binary built with frame pointers (scripts in docs/benchmarks.md,
 "Scaling") and sorts every sample into:
 
@@ -11,7 +11,7 @@ reads `perf script` output of a 1-thread run of a binary built with frame pointe
 
 Samples outside the region (process start-up, the peer, reading inputs) are dropped: only chains through one of
 the --region symbols count. Kernel samples (page faults, zeroing pages) are classified by their user-space chain,
-which frame pointers make reliable (the DWARF unwinding used before lost most of them, so it overcounted serial).
+which frame pointers make reliable (DWARF unwinding loses most of them, and so overcounts serial work).
 GCC 12 gives leaf functions no frame even with -mno-omit-leaf-frame-pointer, so a sample in a leaf loses the leaf's
 caller: when the frame right above the leaf is inside libtbb, that caller was a TBB task body (our code is entered
 from libtbb only through tasks), and the sample counts as parallel.
