@@ -202,7 +202,7 @@ RemoteQueryResult RemoteClient::query(const v1::QueryRequest& request, const Rem
         batch.bricks.resize(size_t(b.bricks_size()));
         uint64_t bytes = 0;
         for (int i = 0; i < b.bricks_size() && protocol_error.empty(); ++i) {
-          protocol_error = decodeBrick(b.bricks(i), encoding, &batch.bricks[size_t(i)], closest);
+          protocol_error = decodeBrick(b.bricks(i), encoding, &batch.bricks[size_t(i)], closest).message();
           bytes += b.bricks(i).values().size() + b.bricks(i).mask().size() + b.bricks(i).closest().size();
         }
         result.wire_bytes += bytes;

@@ -15,15 +15,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   distband::v1::BrickData wire;
   if (!wire.ParseFromArray(data + 1, int(size - 1))) return 0;
   distband::Brick brick;
-  if (!distband::decodeBrick(wire, encoding, &brick, closest).empty()) return 0;
+  if (const distband::Status s = distband::decodeBrick(wire, encoding, &brick, closest); !s.ok()) {
+    if (s.code() != distband::Status::Code::kInvalidArgument || s.message().empty()) __builtin_trap();
+    return 0;
+  }
   if (brick.origin.x % 8 || brick.origin.y % 8 || brick.origin.z % 8) __builtin_trap();
   if ((closest != distband::v1::CLOSEST_FEATURE_NONE) != (brick.closest.size() == size_t(distband::kBrickVoxels)))
     __builtin_trap();
   distband::v1::BrickData again;
   distband::encodeBrick(brick, distband::v1::BRICK_ENCODING_FLOAT32, &again, closest);
   distband::Brick round_trip;
-  if (!distband::decodeBrick(again, distband::v1::BRICK_ENCODING_FLOAT32, &round_trip, closest).empty())
-    __builtin_trap();
+  if (!distband::decodeBrick(again, distband::v1::BRICK_ENCODING_FLOAT32, &round_trip, closest).ok()) __builtin_trap();
   if (std::memcmp(&round_trip.mask, &brick.mask, sizeof brick.mask) != 0) __builtin_trap();
   for (int i = 0; i < distband::kBrickVoxels; ++i) {
     if (!brick.mask.test(i)) continue;

@@ -107,19 +107,20 @@ void encodeBrick(const Brick& brick, v1::BrickEncoding encoding, v1::BrickData* 
     }
 }
 
-std::string decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, Brick* out,
-                        v1::ClosestFeature closest) {
-  if (data.mask().size() != 64) return fmt::format("brick mask has {} bytes, expected 64", data.mask().size());
+Status decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, Brick* out, v1::ClosestFeature closest) {
+  if (data.mask().size() != 64)
+    return Status::InvalidArgument(fmt::format("brick mask has {} bytes, expected 64", data.mask().size()));
   if ((data.x() | data.y() | data.z()) & (kBrickSize - 1))
-    return fmt::format("brick origin ({}, {}, {}) is not a multiple of 8", data.x(), data.y(), data.z());
+    return Status::InvalidArgument(
+        fmt::format("brick origin ({}, {}, {}) is not a multiple of 8", data.x(), data.y(), data.z()));
   Brick b;
   b.origin = {data.x(), data.y(), data.z()};
   std::memcpy(b.mask.words.data(), data.mask().data(), 64);
   const size_t bpv = bytesPerValue(encoding);
   const size_t expected = size_t(b.mask.count()) * bpv;
   if (data.values().size() != expected)
-    return fmt::format("brick at ({}, {}, {}) has {} value bytes, its mask needs {}", data.x(), data.y(), data.z(),
-                       data.values().size(), expected);
+    return Status::InvalidArgument(fmt::format("brick at ({}, {}, {}) has {} value bytes, its mask needs {}", data.x(),
+                                               data.y(), data.z(), data.values().size(), expected));
   const char* src = data.values().data();
   for (int w = 0; w < kBrickVoxels / 64; ++w) {
     uint64_t bits = b.mask.words[w];
@@ -139,8 +140,9 @@ std::string decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, B
   if (const size_t bpc = bytesPerClosest(closest); bpc > 0) {
     const size_t ids = size_t(b.mask.count()) * bpc;
     if (data.closest().size() != ids)
-      return fmt::format("brick at ({}, {}, {}) has {} closest-feature bytes, its mask needs {}", data.x(), data.y(),
-                         data.z(), data.closest().size(), ids);
+      return Status::InvalidArgument(
+          fmt::format("brick at ({}, {}, {}) has {} closest-feature bytes, its mask needs {}", data.x(), data.y(),
+                      data.z(), data.closest().size(), ids));
     b.closest.assign(kBrickVoxels, -1);
     const char* at = data.closest().data();
     for (int w = 0; w < kBrickVoxels / 64; ++w)
@@ -158,7 +160,7 @@ std::string decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, B
       }
   }
   *out = std::move(b);
-  return {};
+  return Status::Ok();
 }
 
 }  // namespace distband

@@ -2,8 +2,8 @@
 // Contract:
 //   * encodeBrick appends one BrickData holding the brick's masked voxels only: a 64-byte little-endian mask and
 //     one value per set bit in increasing offset order, as float32 or float16 (round to nearest even).
-//   * decodeBrick validates untrusted input (mask length, value byte count, origin alignment) and returns "" or
-//     a message naming the problem; on success the brick's masked values are set and the others are 0.
+//   * decodeBrick validates untrusted input (mask length, value byte count, origin alignment) and returns OK or
+//     kInvalidArgument naming the problem; on success the brick's masked values are set and the others are 0.
 //   * With a closest-feature kind (QueryHeader.closest_feature) BrickData.closest carries Brick::closest of the
 //     masked voxels in the same order, int32 (TRIANGLE, POINT) or int64 (VOXEL) little-endian; decodeBrick then
 //     requires it (byte count checked) and fills Brick::closest (-1 where the mask is clear).
@@ -16,6 +16,7 @@
 #include <string>
 
 #include "core/brick.h"
+#include "core/status.h"
 #include "distband/v1/distband.pb.h"
 
 namespace distband {
@@ -40,8 +41,8 @@ inline size_t encodedBrickBytes(int voxels, v1::BrickEncoding encoding,
 void encodeBrick(const Brick& brick, v1::BrickEncoding encoding, v1::BrickData* out,
                  v1::ClosestFeature closest = v1::CLOSEST_FEATURE_NONE);
 
-/// Decodes one BrickData. Returns "" on success, otherwise what is wrong with it.
-std::string decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, Brick* out,
-                        v1::ClosestFeature closest = v1::CLOSEST_FEATURE_NONE);
+/// Decodes one BrickData: OK, or kInvalidArgument saying what is wrong with it.
+Status decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, Brick* out,
+                   v1::ClosestFeature closest = v1::CLOSEST_FEATURE_NONE);
 
 }  // namespace distband

@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "proto/brick_codec.h"
+#include "tests/support/status_testing.h"
 
 namespace distband {
 namespace {
@@ -101,7 +102,7 @@ TEST(BrickCodecTest, RoundTripKeepsMaskedValuesOnly) {
     EXPECT_EQ(data.mask().size(), 64u);
     EXPECT_EQ(data.values().size(), size_t(b.mask.count()) * bytesPerValue(enc));
     Brick out;
-    ASSERT_EQ(decodeBrick(data, enc, &out), "");
+    ASSERT_TRUE(IsOk(decodeBrick(data, enc, &out)));
     EXPECT_EQ(out.origin, b.origin);
     EXPECT_EQ(out.mask.words, b.mask.words);
     for (int i = 0; i < kBrickVoxels; ++i) {
@@ -128,7 +129,7 @@ TEST(BrickCodecTest, ClosestFeatureIdsRoundTripAndTheirLengthIsChecked) {
     encodeBrick(b, v1::BRICK_ENCODING_FLOAT32, &data, kind);
     EXPECT_EQ(data.closest().size(), size_t(b.mask.count()) * bytesPerClosest(kind));
     Brick out;
-    ASSERT_EQ(decodeBrick(data, v1::BRICK_ENCODING_FLOAT32, &out, kind), "");
+    ASSERT_TRUE(IsOk(decodeBrick(data, v1::BRICK_ENCODING_FLOAT32, &out, kind)));
     ASSERT_EQ(out.closest.size(), size_t(kBrickVoxels));
     for (int i = 0; i < kBrickVoxels; ++i) {
       const int64_t want = !b.mask.test(i)                      ? -1
@@ -137,14 +138,15 @@ TEST(BrickCodecTest, ClosestFeatureIdsRoundTripAndTheirLengthIsChecked) {
       EXPECT_EQ(out.closest[size_t(i)], want) << i;
     }
     data.mutable_closest()->pop_back();
-    EXPECT_NE(decodeBrick(data, v1::BRICK_ENCODING_FLOAT32, &out, kind).find("closest-feature bytes"),
-              std::string::npos);
+    EXPECT_TRUE(IsError(decodeBrick(data, v1::BRICK_ENCODING_FLOAT32, &out, kind), Status::Code::kInvalidArgument,
+                        "closest-feature bytes"));
   }
   v1::BrickData plain;
   encodeBrick(b, v1::BRICK_ENCODING_FLOAT32, &plain);
   EXPECT_TRUE(plain.closest().empty());
   Brick out;
-  EXPECT_NE(decodeBrick(plain, v1::BRICK_ENCODING_FLOAT32, &out, v1::CLOSEST_FEATURE_TRIANGLE), "");
+  EXPECT_TRUE(IsError(decodeBrick(plain, v1::BRICK_ENCODING_FLOAT32, &out, v1::CLOSEST_FEATURE_TRIANGLE),
+                      Status::Code::kInvalidArgument, "closest-feature bytes"));
 }
 
 TEST(BrickCodecTest, MalformedBricksAreRejected) {
@@ -156,14 +158,17 @@ TEST(BrickCodecTest, MalformedBricksAreRejected) {
   Brick out;
   v1::BrickData d = good;
   d.set_mask(std::string(63, '\0'));
-  EXPECT_NE(decodeBrick(d, v1::BRICK_ENCODING_FLOAT32, &out).find("mask"), std::string::npos);
+  EXPECT_TRUE(IsError(decodeBrick(d, v1::BRICK_ENCODING_FLOAT32, &out), Status::Code::kInvalidArgument, "mask"));
   d = good;
   d.set_values(std::string(8, '\0'));
-  EXPECT_NE(decodeBrick(d, v1::BRICK_ENCODING_FLOAT32, &out).find("value bytes"), std::string::npos);
+  EXPECT_TRUE(IsError(decodeBrick(d, v1::BRICK_ENCODING_FLOAT32, &out), Status::Code::kInvalidArgument, "value bytes"));
   d = good;
   d.set_x(3);
-  EXPECT_NE(decodeBrick(d, v1::BRICK_ENCODING_FLOAT32, &out).find("multiple of 8"), std::string::npos);
-  EXPECT_NE(decodeBrick(good, v1::BRICK_ENCODING_FLOAT16, &out), "");  // 4 bytes where 2 are due
+  EXPECT_TRUE(
+      IsError(decodeBrick(d, v1::BRICK_ENCODING_FLOAT32, &out), Status::Code::kInvalidArgument, "multiple of 8"));
+  // 4 bytes where 2 are due
+  EXPECT_TRUE(
+      IsError(decodeBrick(good, v1::BRICK_ENCODING_FLOAT16, &out), Status::Code::kInvalidArgument, "value bytes"));
 }
 
 }  // namespace

@@ -23,6 +23,7 @@
 #include "server/server_options.h"
 #include "server/token_auth.h"
 #include "tests/integration/service_fixture.h"
+#include "tests/support/status_testing.h"
 
 namespace distband {
 namespace {
@@ -99,8 +100,9 @@ TEST(HardeningTest, TokenFilesAreCheckedAtStartup) {
   EXPECT_EQ(s.code(), Status::Code::kInvalidArgument);
   EXPECT_NE(s.message().find("line 1"), std::string::npos) << s.message();
   EXPECT_EQ(s.message().find("abc"), std::string::npos) << "a token must never be echoed: " << s.message();
-  EXPECT_FALSE(TokenAuth::load(dir.write("empty", "# nothing\n\n"), &auth).ok());
-  EXPECT_FALSE(TokenAuth::load(dir.path("missing"), &auth).ok());
+  EXPECT_TRUE(IsError(TokenAuth::load(dir.write("empty", "# nothing\n\n"), &auth), Status::Code::kInvalidArgument,
+                      "holds no token"));
+  EXPECT_TRUE(IsError(TokenAuth::load(dir.path("missing"), &auth), Status::Code::kInvalidArgument, "cannot read"));
   ASSERT_TRUE(TokenAuth::load(dir.write("ok", std::string(kToken) + "\n"), &auth).ok());
   EXPECT_TRUE(auth->acceptsHeader(std::string("Bearer ") + kToken));
   EXPECT_TRUE(auth->acceptsHeader(std::string("bearer ") + kToken));
@@ -135,12 +137,13 @@ TEST(HardeningTest, TlsServesOnlyTlsClients) {
   Streamed q = stream(ts.client(), pointsRequest({{4, 4, 4}}, {16, 16, 16}, 1.0, 0, 0), 0);
   EXPECT_TRUE(q.result.status.ok()) << q.result.status.error_message();
   // A plaintext client cannot talk to it.
-  EXPECT_FALSE(RemoteClient(ts.target()).info(&info, std::chrono::seconds(2)).ok());
+  EXPECT_EQ(RemoteClient(ts.target()).info(&info, std::chrono::seconds(2)).error_code(), grpc::StatusCode::UNAVAILABLE);
   // Nor a TLS client that does not trust its certificate.
   RemoteClientOptions untrusting;
   untrusting.tls = true;
   untrusting.tls_root_ca_pem = "-----BEGIN CERTIFICATE-----\nMA==\n-----END CERTIFICATE-----\n";
-  EXPECT_FALSE(RemoteClient(ts.target(), untrusting).info(&info, std::chrono::seconds(2)).ok());
+  EXPECT_EQ(RemoteClient(ts.target(), untrusting).info(&info, std::chrono::seconds(2)).error_code(),
+            grpc::StatusCode::UNAVAILABLE);
   // The container's health probe speaks TLS when told to, and fails without it.
   const std::string probe = std::string(DISTBAND_HEALTH_BINARY) + " --timeout 2 --server " + ts.target();
   EXPECT_EQ(std::system((probe + " --tls-ca " + dir.path("server.pem") + " >/dev/null 2>&1").c_str()), 0);
@@ -159,7 +162,7 @@ TEST(HardeningTest, MutualTlsRequiresAClientCertificate) {
   anonymous.tls_root_ca_pem = readAll(dir.path("server.pem"));
   TestServer ts(o, anonymous);
   v1::ServerInfo info;
-  EXPECT_FALSE(ts.client().info(&info, std::chrono::seconds(2)).ok());
+  EXPECT_EQ(ts.client().info(&info, std::chrono::seconds(2)).error_code(), grpc::StatusCode::UNAVAILABLE);
   RemoteClientOptions with_cert = anonymous;
   with_cert.tls_client_cert_pem = readAll(dir.path("client.pem"));
   with_cert.tls_client_key_pem = readAll(dir.path("client.key"));
@@ -174,7 +177,7 @@ TEST(HardeningTest, BadTlsFilesStopTheStartWithTheFlagNamed) {
   o.tls_key_file = dir.write("key.pem", "not a key");
   DistbandServer server(o);
   const grpc::Status s = server.start();
-  EXPECT_FALSE(s.ok());
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
   EXPECT_NE(s.error_message().find("--tls-"), std::string::npos) << s.error_message();
 }
 
@@ -535,7 +538,8 @@ TEST(HardeningTest, UploadsNeverWriteFiles) {
     v1::UploadReply up;
     const std::string bunny = readAll(DISTBAND_TEST_DATA_DIR "/meshes/bunny.obj");
     ASSERT_TRUE(ts.client().uploadMesh(bunny, v1::MESH_FORMAT_OBJ, "bunny.obj", &up).ok());
-    EXPECT_FALSE(ts.client().uploadMesh("ply\nformat ascii 1.0\n", v1::MESH_FORMAT_PLY, "bad.ply", &up).ok());
+    EXPECT_EQ(ts.client().uploadMesh("ply\nformat ascii 1.0\n", v1::MESH_FORMAT_PLY, "bad.ply", &up).error_code(),
+              grpc::StatusCode::INVALID_ARGUMENT);
     EXPECT_TRUE(filesIn(private_tmp.path("")).empty()) << "the server wrote into TMPDIR";
     for (const std::string& f : filesIn(tmp))
       EXPECT_TRUE(before.count(f) || f.rfind("distband_", 0) == 0) << "the server created " << (tmp / f).string();
