@@ -67,8 +67,12 @@ grpc::Status DistbandServer::start() {
     if (Status s = TokenAuth::load(options_.auth_token_file, &auth); !s.ok()) return toGrpcStatus(s);
   std::shared_ptr<grpc::ServerCredentials> credentials;
   if (Status s = serverCredentials(options_, &credentials); !s.ok()) return toGrpcStatus(s);
-  service_ = std::make_unique<DistanceFieldService>(options_, hooks_, std::move(auth));
+  metrics_ = options_.metrics_listen.empty() ? Metrics::disabled() : Metrics::enabled();
+  service_ = std::make_unique<DistanceFieldService>(options_, hooks_, std::move(auth), *metrics_);
   if (Status s = service_->connectPeers(); !s.ok()) return toGrpcStatus(s);
+  if (metrics_->on())
+    if (Status s = MetricsEndpoint::start(options_.metrics_listen, *metrics_, &metrics_endpoint_); !s.ok())
+      return toGrpcStatus(s);
 
   grpc::EnableDefaultHealthCheckService(true);
   if (options_.reflection) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -100,6 +104,9 @@ grpc::Status DistbandServer::start() {
       options_.max_concurrent_queries, options_.max_streams, options_.resolvedGrpcThreads(), humanBytes(plan.total),
       humanBytes(plan.requests), humanBytes(plan.cache), humanBytes(plan.grpc), options_.idle_timeout_seconds,
       options_.auth_token_file.empty() ? ", no authentication" : ", bearer tokens required");
+  if (metrics_endpoint_)
+    spdlog::info("metrics: http://{}/metrics (port {}; Prometheus text format, no token: keep the address private)",
+                 options_.metrics_listen, metrics_endpoint_->port());
   if (service_->coordinating())
     spdlog::info("coordinating: queries are split into tiles of at most {} voxels computed by --peers {} ({} per "
                  "replica in flight, {} retries, tile timeout {:g}s)",
