@@ -70,9 +70,13 @@ grpc::Status DistbandServer::start() {
   metrics_ = options_.metrics_listen.empty() ? Metrics::disabled() : Metrics::enabled();
   service_ = std::make_unique<DistanceFieldService>(options_, hooks_, std::move(auth), *metrics_);
   if (Status s = service_->connectPeers(); !s.ok()) return toGrpcStatus(s);
-  if (metrics_->on())
+  if (metrics_->on()) {
     if (Status s = MetricsEndpoint::start(options_.metrics_listen, *metrics_, &metrics_endpoint_); !s.ok())
       return toGrpcStatus(s);
+    // Before the listening line, which tools wait for ("(port N,"): the metrics port is known by then.
+    spdlog::info("metrics: http://{}/metrics (port {}; Prometheus text format, no token: keep the address private)",
+                 options_.metrics_listen, metrics_endpoint_->port());
+  }
 
   grpc::EnableDefaultHealthCheckService(true);
   if (options_.reflection) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -104,9 +108,6 @@ grpc::Status DistbandServer::start() {
       options_.max_concurrent_queries, options_.max_streams, options_.resolvedGrpcThreads(), humanBytes(plan.total),
       humanBytes(plan.requests), humanBytes(plan.cache), humanBytes(plan.grpc), options_.idle_timeout_seconds,
       options_.auth_token_file.empty() ? ", no authentication" : ", bearer tokens required");
-  if (metrics_endpoint_)
-    spdlog::info("metrics: http://{}/metrics (port {}; Prometheus text format, no token: keep the address private)",
-                 options_.metrics_listen, metrics_endpoint_->port());
   if (service_->coordinating())
     spdlog::info("coordinating: queries are split into tiles of at most {} voxels computed by --peers {} ({} per "
                  "replica in flight, {} retries, tile timeout {:g}s)",
