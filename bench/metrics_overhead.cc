@@ -1,12 +1,13 @@
-// metrics_overhead: what --metrics-listen costs, and what a scrape weighs. In one run it starts two distband-server
-// processes on loopback, identical but for --metrics-listen, and:
-//   1. runs the same queries on both, alternating (A B B A per round, so drift cancels): full-domain N^3 queries (one
-//      point, then the bunny mesh, as service_bench does) and a block of small 32^3 queries (the per-call part);
-//      medians per server and the difference (goal <= 2 %);
+// metrics_overhead: what --metrics-listen costs, and what a scrape weighs. In one run it starts three distband-server
+// processes on loopback — without metrics, with --metrics-listen, and without again (the noise floor) — and:
+//   1. runs the same queries on all three, in a rotating order each round: full-domain N^3 queries (one point, then
+//      the bunny mesh, as service_bench does) and a block of small 32^3 queries (the per-call part); the median of
+//      the per-round ratios against the first server (goal <= 2 %), beside the same for the identical third server;
 //   2. makes --calls GetInfo calls (default 10^6) on the server with metrics, from --clients threads, then scrapes
 //      /metrics: its size in bytes (goal < 64 KiB) and whether the call counter says --calls.
 // Output: a markdown table on stdout and a JSON file (--json).
 #include <signal.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -14,6 +15,7 @@
 #include <cstdio>
 #include <fstream>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -24,6 +26,7 @@
 #include <nlohmann/json.hpp>
 
 #include "client/remote_client.h"
+#include "server/metrics.h"
 #include "tests/support/child_server.h"
 #include "tests/support/http_get.h"
 
@@ -53,6 +56,15 @@ class ServerProcess : public ChildServer {
     waitExit(std::chrono::seconds(30));
   }
   int metricsPort() const { return metrics_port_; }
+  /// CPU seconds (user + system) the server has used so far, exited threads included (/proc/PID/stat).
+  double cpuSeconds() const {
+    std::ifstream in("/proc/" + std::to_string(pid()) + "/stat");
+    const std::string stat((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::istringstream fields(stat.substr(stat.rfind(')') + 2));
+    std::vector<std::string> f;
+    for (std::string x; fields >> x;) f.push_back(x);
+    return f.size() > 12 ? (std::stod(f[11]) + std::stod(f[12])) / double(sysconf(_SC_CLK_TCK)) : 0;
+  }
 
  private:
   int metrics_port_ = 0;
@@ -83,6 +95,27 @@ double timeQuery(RemoteClient& client, const v1::QueryRequest& request) {
   return s;
 }
 
+/// What one query's handler reports (server/distance_field_service.cc), `messages` replies written: nanoseconds a
+/// query, over `n` queries on one thread.
+double reportNanoseconds(Metrics& m, int n, int messages) {
+  const auto t0 = Clock::now();
+  for (int i = 0; i < n; ++i) {
+    m.queryQueued(1);
+    m.queryQueued(-1);
+    m.queryAdmitted(1e-4);
+    m.queryRunning(1);
+    for (int k = 0; k < messages; ++k) {
+      m.querySentBytes(1 << 20);
+      if (k == 1) m.queryFirstBrick(0.01);
+    }
+    m.querySentVoxels(32768);
+    m.queryComputed(1e-3, 2e-3);
+    m.queryRunning(-1);
+    m.callEnded(Rpc::kQuery, grpc::StatusCode::OK, 0.005);
+  }
+  return since(t0) * 1e9 / n;
+}
+
 double sample(const std::string& text, const std::string& series) {
   const size_t at = text.find("\n" + series + " ");
   return at == std::string::npos ? -1 : std::stod(text.substr(at + series.size() + 2));
@@ -94,12 +127,14 @@ double sample(const std::string& text, const std::string& series) {
 int main(int argc, char** argv) {
   using namespace distband;
   CLI::App app{"metrics_overhead: distband-server with --metrics-listen against without, in one run"};
-  int resolution = 192, threads = 2, rounds = 5, small = 200, clients = 4;
+  int resolution = 192, threads = 2, rounds = 7, small = 200, clients = 4;
   uint64_t calls = 1000000;
   std::string mesh_path = DISTBAND_BENCH_DIR "/../tests/data/meshes/bunny.obj", json_path;
   app.add_option("--resolution", resolution, "N of the full-domain N^3 queries")->capture_default_str();
-  app.add_option("--threads", threads, "--threads of both servers")->capture_default_str();
-  app.add_option("--rounds", rounds, "rounds of A B B A")->capture_default_str();
+  app.add_option("--threads", threads, "--threads of every server")->capture_default_str();
+  app.add_option("--rounds", rounds, "rounds; each runs every case on the three servers, in a rotating order")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--small", small, "32^3 queries per block (the per-call part)")->capture_default_str();
   app.add_option("--calls", calls, "GetInfo calls before the scrape whose size is measured")->capture_default_str();
   app.add_option("--clients", clients, "threads (each with its own channel) making the GetInfo calls")
@@ -107,34 +142,61 @@ int main(int argc, char** argv) {
   app.add_option("--mesh", mesh_path, "the mesh of the second full-domain case")->capture_default_str();
   app.add_option("--json", json_path, "write the results here too");
   CLI11_PARSE(app, argc, argv);
+  nlohmann::json out_early;
 
+  // In process first: what a query's reports cost, with metrics on and off (the hot path's share of a query).
+  {
+    auto enabled = Metrics::enabled(), disabled = Metrics::disabled();
+    const int n = 1000000, messages = 20;
+    reportNanoseconds(*enabled, n / 10, messages);  // warm-up
+    const double on_ns = reportNanoseconds(*enabled, n, messages), off_ns = reportNanoseconds(*disabled, n, messages);
+    const auto t0 = Clock::now();
+    const std::string text = enabled->text();
+    const double scrape_us = since(t0) * 1e6;
+    std::printf("in process: one query's reports (%d replies) cost %.0f ns with metrics on, %.1f ns off; rendering a "
+                "scrape (%zu bytes) %.0f us\n",
+                messages, on_ns, off_ns, text.size(), scrape_us);
+    nlohmann::json& r = out_early["reports"];
+    r["messages"] = messages;
+    r["on_ns_per_query"] = on_ns;
+    r["off_ns_per_query"] = off_ns;
+    r["scrape_render_us"] = scrape_us;
+  }
+
+  // Three servers: metrics off (A), metrics on (B) and a second one without (A'), whose difference from A is the
+  // noise floor of this machine: a figure for B is only as good as A' against A.
   const std::vector<std::string> common = {"--threads", std::to_string(threads), "--max-queries", "1",
                                            "--memory-budget", "4G"};
   std::vector<std::string> with = common;
   with.insert(with.end(), {"--metrics-listen", "127.0.0.1:0"});
-  ServerProcess off(common), on(with);
-  RemoteClient client_off(off.target()), client_on(on.target());
-  std::printf("servers: metrics off on %s, metrics on on %s (metrics port %d); %d threads each\n",
-              off.target().c_str(), on.target().c_str(), on.metricsPort(), threads);
+  ServerProcess off(common), on(with), control(common);
+  const ServerProcess* servers[3] = {&off, &on, &control};
+  RemoteClient client_off(off.target()), client_on(on.target()), client_control(control.target());
+  RemoteClient* clients_by_server[3] = {&client_off, &client_on, &client_control};
+  std::printf("servers: metrics off %s, metrics on %s (metrics port %d), metrics off again %s; %d threads each\n",
+              off.target().c_str(), on.target().c_str(), on.metricsPort(), control.target().c_str(), threads);
 
-  v1::UploadReply up_off, up_on;
-  if (!client_off.uploadMeshFile(mesh_path, &up_off).ok() || !client_on.uploadMeshFile(mesh_path, &up_on).ok()) {
-    std::fprintf(stderr, "cannot upload %s\n", mesh_path.c_str());
-    return 1;
-  }
+  v1::UploadReply up;
+  for (RemoteClient* c : clients_by_server)
+    if (!c->uploadMeshFile(mesh_path, &up).ok()) {
+      std::fprintf(stderr, "cannot upload %s\n", mesh_path.c_str());
+      return 1;
+    }
   struct Case {
     std::string name;
     std::vector<v1::QueryRequest> requests;  // run back to back, timed together
-    std::vector<double> off, on;
+    std::vector<double> seconds[3];          // per server: off, on, control
+    std::vector<double> on_ratio, control_ratio;  // per round, against off
+    double cpu[3] = {0, 0, 0};               // the servers' CPU seconds over every round
   };
   std::vector<Case> cases;
-  cases.push_back({fmt::format("1 point, {}^3, full domain", resolution), {pointQuery(resolution)}, {}, {}});
+  cases.push_back({fmt::format("1 point, {}^3, full domain", resolution), {pointQuery(resolution)}, {}, {}, {}});
   v1::QueryRequest bunny;
-  bunny.set_asset_id(up_on.asset_id());  // content-addressed: the same id on both
+  bunny.set_asset_id(up.asset_id());  // content-addressed: the same id on every server
   bunny.mutable_grid()->set_resolution(uint32_t(resolution));
   bunny.set_segment_length(0.1);
-  cases.push_back({fmt::format("bunny, {}^3, full domain", resolution), {bunny}, {}, {}});
-  Case many{fmt::format("{} queries, 1 point, 32^3", small), {}, {}, {}};
+  cases.push_back({fmt::format("bunny, {}^3, full domain", resolution), {bunny}, {}, {}, {}});
+  Case many{fmt::format("{} queries, 1 point, 32^3", small), {}, {}, {}, {}};
   for (int i = 0; i < small; ++i) many.requests.push_back(pointQuery(32));
   cases.push_back(many);
 
@@ -143,28 +205,49 @@ int main(int argc, char** argv) {
     for (const v1::QueryRequest& r : c.requests) s += timeQuery(client, r);
     return s;
   };
-  for (Case& c : cases) {  // warm-up, untimed
-    run(client_off, c);
-    run(client_on, c);
-  }
+  for (Case& c : cases)  // warm-up, untimed
+    for (RemoteClient* client : clients_by_server) run(*client, c);
+  // Each round runs every case on the three servers in one of the six orders (rotating), so no server is always
+  // first or last; the ratios are taken within a round (drift between rounds cancels).
+  const int orders[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
   for (int round = 0; round < rounds; ++round)
     for (Case& c : cases) {
-      c.off.push_back(run(client_off, c));
-      c.on.push_back(run(client_on, c));
-      c.on.push_back(run(client_on, c));
-      c.off.push_back(run(client_off, c));
+      double t[3];
+      for (int k : orders[round % 6]) {
+        const double cpu0 = servers[k]->cpuSeconds();
+        t[k] = run(*clients_by_server[k], c);
+        c.cpu[k] += servers[k]->cpuSeconds() - cpu0;
+      }
+      for (int k = 0; k < 3; ++k) c.seconds[k].push_back(t[k]);
+      c.on_ratio.push_back(t[1] / t[0]);
+      c.control_ratio.push_back(t[2] / t[0]);
     }
 
-  nlohmann::json out;
+  nlohmann::json out = out_early;
   out["resolution"] = resolution;
   out["threads"] = threads;
   out["rounds"] = rounds;
-  std::printf("\n| case | metrics off (median s) | metrics on (median s) | on / off - 1 |\n|---|---|---|---|\n");
+  std::printf("\n%d rounds. Time: the median of the per-round ratios against the server without metrics; CPU: the "
+              "servers' CPU seconds over all rounds (/proc), against the same. The second server without metrics "
+              "is the noise floor.\n\n"
+              "| case | metrics off: median s, CPU s | metrics on / off: time, CPU | second server without / off: "
+              "time, CPU |\n|---|---|---|---|\n",
+              rounds);
   for (const Case& c : cases) {
-    const double a = median(c.off), b = median(c.on);
-    std::printf("| %s | %.4f | %.4f | %+.2f %% |\n", c.name.c_str(), a, b, 100 * (b / a - 1));
-    out["cases"].push_back({{"name", c.name}, {"off_s", c.off}, {"on_s", c.on}, {"off_median_s", a},
-                            {"on_median_s", b}, {"difference_percent", 100 * (b / a - 1)}});
+    const double a = median(c.seconds[0]), on_pct = 100 * (median(c.on_ratio) - 1),
+                 control_pct = 100 * (median(c.control_ratio) - 1), on_cpu = 100 * (c.cpu[1] / c.cpu[0] - 1),
+                 control_cpu = 100 * (c.cpu[2] / c.cpu[0] - 1);
+    std::printf("| %s | %.4f, %.2f | %+.2f %%, %+.2f %% | %+.2f %%, %+.2f %% |\n", c.name.c_str(), a, c.cpu[0], on_pct,
+                on_cpu, control_pct, control_cpu);
+    out["cases"].push_back({{"name", c.name},
+                            {"off_s", c.seconds[0]},
+                            {"on_s", c.seconds[1]},
+                            {"control_s", c.seconds[2]},
+                            {"cpu_s", {c.cpu[0], c.cpu[1], c.cpu[2]}},
+                            {"on_vs_off_percent", on_pct},
+                            {"control_vs_off_percent", control_pct},
+                            {"on_vs_off_cpu_percent", on_cpu},
+                            {"control_vs_off_cpu_percent", control_cpu}});
   }
 
   // 10^6 cheap calls, then the scrape.
