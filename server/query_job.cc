@@ -109,7 +109,7 @@ void QueryJob::logStats(LogLine& line) const {
       .number("voxels", voxels_sent_)
       .number("bricks", bricks_sent_)
       .real("MB", value_bytes_ / 1e6, "{:.1f}")
-      .seconds("seeds", seed_seconds_)
+      .seconds("seed_time", seed_seconds_)  // "seeds" is the query's seeds already
       .seconds("compute", result_.seconds)
       .text("enc", query_.encoding == v1::BRICK_ENCODING_FLOAT16 ? "f16" : "f32");
 }

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -47,6 +48,22 @@ bool logShows(ChildServer& child, const std::string& needle,
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   return child.log().find(needle) != std::string::npos;
+}
+
+/// Whether some object of a JSON line names a key twice (a parser keeps one of them: a field would be lost).
+bool duplicateKeys(const std::string& line) {
+  std::vector<std::set<std::string>> objects;
+  bool duplicate = false;
+  using Event = nlohmann::json::parse_event_t;
+  const auto on_event = [&](int, Event event, nlohmann::json& parsed) {
+    if (event == Event::object_start) objects.emplace_back();
+    else if (event == Event::object_end && !objects.empty()) objects.pop_back();
+    else if (event == Event::key && !objects.empty() && !objects.back().insert(parsed.get<std::string>()).second)
+      duplicate = true;
+    return true;
+  };
+  const auto parsed_line = nlohmann::json::parse(line, on_event, false);
+  return duplicate && !parsed_line.is_discarded();
 }
 
 std::vector<std::string> lines(const std::string& text) {
@@ -114,6 +131,7 @@ TEST(ObservabilityTest, ARequestIdReachesTheLogsOfTheCoordinatorAndEveryReplica)
     const auto j = nlohmann::json::parse(line, nullptr, false);
     ASSERT_FALSE(j.is_discarded()) << "not one JSON object: " << line;
     ASSERT_TRUE(j.is_object()) << line;
+    EXPECT_FALSE(duplicateKeys(line)) << line;
     EXPECT_TRUE(j.contains("ts") && j.contains("level")) << line;
     if (j.value("event", "") == "Query") {
       ++query_lines;
@@ -160,6 +178,15 @@ TEST(ObservabilityTest, InvalidOrMissingRequestIdsAreReplacedAndJsonLogsPassJson
     EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
     EXPECT_EQ(initialMetadata(context, kRequestIdHeader), "refused-1");
   }
+  // And a query computed here (its line has the most fields).
+  {
+    grpc::ClientContext context;
+    auto reader = stub->Query(&context, pointsRequest({{4, 5, 6}}, {32, 32, 32}, 0.5, 2.0, 0));
+    v1::QueryReply reply;
+    while (reader->Read(&reply)) {
+    }
+    EXPECT_TRUE(reader->Finish().ok());
+  }
   ASSERT_TRUE(logShows(server, "\"request_id\":\"refused-1\"")) << server.log();
   server.signal(SIGTERM);
   EXPECT_EQ(server.waitExit(std::chrono::seconds(10)), 0);
@@ -168,7 +195,13 @@ TEST(ObservabilityTest, InvalidOrMissingRequestIdsAreReplacedAndJsonLogsPassJson
   for (const std::string& line : lines(log)) {
     const auto j = nlohmann::json::parse(line, nullptr, false);
     ASSERT_TRUE(j.is_object()) << line;
+    EXPECT_FALSE(duplicateKeys(line)) << line;
     if (j.value("event", "") == "GetInfo" && j.value("request_id_replaced", false)) ++replaced;
+    if (j.value("event", "") == "Query" && j.value("status", "") == "OK") {
+      EXPECT_EQ(j["voxels"], 32 * 32 * 32);
+      EXPECT_TRUE(j["limit"].is_null());  // no limit: infinite, which JSON cannot write
+      EXPECT_TRUE(j["seed_time"].is_number());
+    }
   }
   EXPECT_EQ(replaced, 3);  // the three invalid ones; a missing id is generated without a note
   EXPECT_EQ(log.find("has spaces"), std::string::npos) << "a refused id must not reach the log";
