@@ -440,6 +440,9 @@ Status MetricsEndpoint::start(const std::string& address, Metrics& metrics, std:
         "--metrics-listen '{}': expected IPV4:PORT or [IPV6]:PORT (an address literal: 127.0.0.1:9100, 0.0.0.0:9100)",
         address));
   if (!metrics.on()) return Status::Internal("the metrics endpoint needs enabled metrics");
+  if (address.front() == '[' && !mg_check_feature(8))
+    return Status::InvalidArgument(fmt::format(
+        "--metrics-listen '{}': this build's HTTP server (civetweb) has no IPv6 support; use an IPv4 address", address));
   std::unique_ptr<MetricsEndpoint> endpoint(new MetricsEndpoint());
   endpoint->impl_ = std::make_unique<Impl>(metrics);
   try {

@@ -113,7 +113,8 @@ class Metrics {
 class MetricsEndpoint {
  public:
   /// Listens on `address` (IPV4:PORT or [IPV6]:PORT; port 0 picks a free one). Fails (INVALID_ARGUMENT naming
-  /// --metrics-listen) when the address is malformed or cannot be bound.
+  /// --metrics-listen) when the address is malformed or cannot be bound, or is IPv6 and civetweb was built without
+  /// it (as Debian bookworm's is).
   static Status start(const std::string& address, Metrics& metrics, std::unique_ptr<MetricsEndpoint>* out);
   ~MetricsEndpoint();
   int port() const { return port_; }
