@@ -166,7 +166,9 @@ struct Metrics::Impl {
   std::array<Histogram*, 2> parse_seconds{};
   std::array<std::array<Counter*, kUploadRefusalCount>, 2> refusals{};
   // Coordinator.
-  prometheus::Family<Counter>*tiles_dispatched = nullptr, *tiles_retried = nullptr, *tiles_failed = nullptr;
+  prometheus::Family<Counter>* tiles_dispatched = nullptr;
+  prometheus::Family<Counter>* tiles_retried = nullptr;
+  prometheus::Family<Counter>* tiles_failed = nullptr;
   Gauge* merge_buffer = nullptr;
   struct ReplicaSeries {
     Counter *dispatched, *retried, *failed;
