@@ -59,7 +59,9 @@ RUN groupadd --system --gid 10001 distband \
  && useradd --system --uid 10001 --gid 10001 --no-create-home --home-dir /nonexistent \
             --shell /usr/sbin/nologin distband
 USER 10001:10001
-EXPOSE 50051
+# 50051: gRPC. 9464: Prometheus metrics, served only when --metrics-listen 0.0.0.0:9464 is passed (no token: publish
+# it to your Prometheus only, docs/operations.md).
+EXPOSE 50051 9464
 # The gRPC health service on the default port (change it here too if you change --listen's port). Kubernetes
 # ignores HEALTHCHECK and probes grpc.health.v1 natively (deploy/k8s); podman keeps it only in docker-format
 # images (scripts/container builds with --format docker).

@@ -43,6 +43,10 @@ class ActiveCalls {
     /// True when the watchdog cancelled this call for idleness.
     bool idleExpired() const { return idle_expired_.load(); }
     const char* method() const { return method_; }
+    /// The call's work was refused for the memory budget or the compute slots (not for a limit); the metrics tell
+    /// the two RESOURCE_EXHAUSTED reasons apart by it. The handler's thread only.
+    void markBudgetRefusal() { budget_refused_ = true; }
+    bool budgetRefused() const { return budget_refused_; }
 
    private:
     friend class ActiveCalls;
@@ -53,6 +57,7 @@ class ActiveCalls {
     Interrupter interrupter_;
     std::atomic<int64_t> waiting_since_ns_{0};  ///< steady-clock ns when the current wait began; 0 = not waiting
     std::atomic<bool> idle_expired_{false};
+    bool budget_refused_ = false;
     std::list<Call*>::iterator position_;
   };
 

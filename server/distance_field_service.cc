@@ -6,6 +6,7 @@
 #include <exception>
 #include <mutex>
 #include <new>
+#include <optional>
 #include <thread>
 
 #include <fmt/format.h>
@@ -15,6 +16,7 @@
 #include "core/band/band_engine.h"
 #include "server/asset_parsing.h"
 #include "server/grpc_status.h"
+#include "server/log_line.h"
 #include "server/query_job.h"
 #include "server/request_validation.h"
 #include "server/tiled_query.h"
@@ -26,18 +28,35 @@ using Clock = std::chrono::steady_clock;
 
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-std::string statusText(const Status& s) { return s.ok() ? "OK" : fmt::format("{} \"{}\"", Status::codeName(s.code()), s.message()); }
+/// A call's log line, opened with its request id (and, when the client's was refused, a note saying so).
+LogLine callLine(std::string_view method, const RequestId& rid, std::string_view id_name = {},
+                 std::string_view id = {}) {
+  LogLine line(method, id_name, id);
+  line.text("request_id", rid.id);
+  if (rid.replaced) line.flag("request_id_replaced", true);
+  return line;
+}
 
-/// Client-chosen text in a log line: at most 64 bytes, non-printables escaped (no forged log lines).
-std::string logSafe(std::string_view s) {
-  std::string out;
-  for (size_t i = 0; i < s.size() && i < 64; ++i) {
-    const unsigned char c = static_cast<unsigned char>(s[i]);
-    if (c >= 0x20 && c < 0x7f && c != '\\' && c != '\'') out += char(c);
-    else out += fmt::format("\\x{:02x}", c);
+/// A query counted as running (admitted, streaming) for its scope.
+class RunningQuery {
+ public:
+  explicit RunningQuery(Metrics& metrics) : metrics_(metrics) { metrics_.queryRunning(1); }
+  ~RunningQuery() { metrics_.queryRunning(-1); }
+  RunningQuery(const RunningQuery&) = delete;
+  RunningQuery& operator=(const RunningQuery&) = delete;
+
+ private:
+  Metrics& metrics_;
+};
+
+/// Why an upload that ended with `s` was refused; none for a success or a call the client itself ended.
+std::optional<UploadRefusal> refusalOf(const Status& s, bool budget_refused) {
+  switch (s.code()) {
+    case Status::Code::kUnauthenticated: return UploadRefusal::kAuth;
+    case Status::Code::kInvalidArgument: return UploadRefusal::kBadInput;
+    case Status::Code::kResourceExhausted: return budget_refused ? UploadRefusal::kBudget : UploadRefusal::kLimits;
+    default: return std::nullopt;
   }
-  if (s.size() > 64) out += "...";
-  return out;
 }
 
 // Arena: `threads - 1` shared workers, plus one reserved slot per concurrent query for the query's own compute
@@ -62,22 +81,52 @@ MemoryPlan MemoryPlan::of(const ServerOptions& o) {
 }
 
 DistanceFieldService::DistanceFieldService(const ServerOptions& options, ServerHooks hooks,
-                                           std::unique_ptr<TokenAuth> auth)
+                                           std::unique_ptr<TokenAuth> auth, Metrics& metrics)
     : options_(options),
       hooks_(std::move(hooks)),
       auth_(std::move(auth)),
       plan_(MemoryPlan::of(options)),
+      metrics_(metrics),
       arena_(makeArena(options)),
       cache_(plan_.cache),
       budget_(plan_.requests),
       slots_(options.max_concurrent_queries),
-      calls_(options.max_streams, std::chrono::milliseconds(int64_t(options.idle_timeout_seconds * 1000))) {}
+      calls_(options.max_streams, std::chrono::milliseconds(int64_t(options.idle_timeout_seconds * 1000))) {
+  // Read when Prometheus scrapes; the pool (set by connectPeers() before serving) only on a coordinator.
+  Metrics::Sources sources;
+  sources.streams_open = [this] { return double(calls_.active()); };
+  sources.budget_reserved_bytes = [this] { return double(budget_.used()); };
+  sources.budget_bytes = [this] { return double(budget_.capacity()); };
+  sources.cache_bytes = [this] { return double(cache_.usedBytes()); };
+  sources.cache_capacity_bytes = [this] { return double(cache_.capacityBytes()); };
+  sources.cache_entries = [this] { return double(cache_.size()); };
+  const double threads = options_.resolvedComputeThreads();
+  sources.compute_threads = [threads] { return threads; };
+  if (!options_.peers.empty()) {
+    sources.replicas_known = [this] { return pool_ ? double(pool_->lastReplicaCount()) : 0.0; };
+    sources.replicas_healthy = [this] { return pool_ ? double(pool_->healthyReplicas()) : 0.0; };
+  }
+  metrics_.watch(std::move(sources));
+}
 
 DistanceFieldService::~DistanceFieldService() = default;
 
 Status DistanceFieldService::connectPeers() {
   if (options_.peers.empty()) return Status::Ok();
-  return ReplicaPool::create(options_, &pool_);
+  if (Status s = ReplicaPool::create(options_, &pool_); !s.ok()) return s;
+  if (metrics_.on()) {
+    pool_->onResolved([this](const std::vector<std::string>& addresses) { metrics_.replicasResolved(addresses); });
+    pool_->watchHealth(std::chrono::seconds(2));
+  }
+  return Status::Ok();
+}
+
+void DistanceFieldService::uploadEnded(Rpc rpc, const Status& status, const ActiveCalls::Call* call, uint64_t bytes,
+                                       double seconds) {
+  if (!metrics_.on()) return;
+  metrics_.uploadReceived(rpc, bytes);
+  if (auto reason = refusalOf(status, call && call->budgetRefused())) metrics_.uploadRefused(rpc, *reason);
+  metrics_.callEnded(rpc, toGrpcCode(status.code()), seconds);
 }
 
 Status DistanceFieldService::admitCall(grpc::ServerContext* context, const char* method,
@@ -96,6 +145,7 @@ Status DistanceFieldService::admitWork(grpc::ServerContext* context, ActiveCalls
   const auto wait = std::chrono::milliseconds(options_.queue_wait_ms);
   if (Status s = budget_.reserve(bytes, what, wait, abandon, reservation); !s.ok()) {
     if (s.code() == Status::Code::kCancelled && call.interrupter().interrupted()) return call.interrupter().status();
+    if (s.code() == Status::Code::kResourceExhausted) call.markBudgetRefusal();
     return s;
   }
   const auto left = std::max(std::chrono::milliseconds(0),
@@ -105,6 +155,7 @@ Status DistanceFieldService::admitWork(grpc::ServerContext* context, ActiveCalls
     if (call.interrupter().interrupted()) return call.interrupter().status();
     if (context->IsCancelled()) return Status::Cancelled("the client cancelled while the call waited for a compute slot");
     if (shutting_down_.load()) return Status::Unavailable("the server is shutting down");
+    call.markBudgetRefusal();
     return Status::ResourceExhausted(
         fmt::format("{}: all {} compute slots (--max-queries, concurrent computations) stayed busy for {} ms; retry later", what,
                     options_.max_concurrent_queries, options_.queue_wait_ms));
@@ -186,10 +237,12 @@ Status DistanceFieldService::readUpload(grpc::ServerContext* context, grpc::Serv
       const uint64_t bound = expected_bytes > 0 ? expected_bytes : options_.max_upload_bytes;
       const uint64_t grown = std::min<uint64_t>(bound, std::max<uint64_t>(size, cap + cap / 2 + (64 << 10)));
       if (!reservation->held()) budget_.tryReserve(0, reservation);
-      if (!reservation->tryGrow(cap + grown - std::min<uint64_t>(reservation->bytes(), cap + grown)))
+      if (!reservation->tryGrow(cap + grown - std::min<uint64_t>(reservation->bytes(), cap + grown))) {
+        call.markBudgetRefusal();
         return Status::ResourceExhausted(fmt::format(
             "{}.data: the upload has reached {} and needs {} more, but only {} of the server's memory budget is free",
             what, humanBytes(data->size()), humanBytes(grown - cap), humanBytes(budget_.available())));
+      }
       data->reserve(grown);
       reservation->shrinkTo(data->capacity());
     }
@@ -212,11 +265,15 @@ Status DistanceFieldService::computeAdmitted(grpc::ServerContext* context, Activ
 
 Status DistanceFieldService::parseMeshAdmitted(grpc::ServerContext* context, ActiveCalls::Call& call,
                                                std::string_view bytes, v1::MeshFormat format, const std::string& name,
-                                               std::string_view field, std::shared_ptr<const Asset>* asset) {
+                                               std::string_view field, std::shared_ptr<const Asset>* asset,
+                                               double* parse_seconds) {
   const MeshLimits limits{options_.max_vertices, options_.max_triangles};
   return computeAdmitted(context, call, meshParsePeakBytes(bytes.size()),
                          fmt::format("parsing the mesh ({} bytes)", bytes.size()), [&] {
-                           return parseMeshAsset(bytes, format, name, field, limits, &call.interrupter(), asset);
+                           const auto t0 = Clock::now();
+                           Status s = parseMeshAsset(bytes, format, name, field, limits, &call.interrupter(), asset);
+                           if (parse_seconds) *parse_seconds = since(t0);
+                           return s;
                          });
 }
 
@@ -224,10 +281,12 @@ grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
                                               grpc::ServerReader<v1::UploadMeshChunk>* reader,
                                               v1::UploadReply* reply) {
   const auto t0 = Clock::now();
+  const RequestId rid = takeRequestId(context);
   const std::string peer = context->peer();
   std::unique_ptr<ActiveCalls::Call> call;
   std::string data;
   v1::UploadMeshChunk first;
+  double parse_seconds = -1;
   MemoryBudget::Reservation buffer;
   std::shared_ptr<const Asset> asset;
   bool cached = false;
@@ -255,7 +314,9 @@ grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
     if ((asset = cache_.find(meshAssetId(data, h.format())))) {
       cached = true;
     } else {
-      status = parseMeshAdmitted(context, *call, data, h.format(), h.name(), "UploadMeshChunk.data", &asset);
+      status = parseMeshAdmitted(context, *call, data, h.format(), h.name(), "UploadMeshChunk.data", &asset,
+                                 &parse_seconds);
+      if (parse_seconds >= 0) metrics_.uploadParsed(Rpc::kUploadMesh, parse_seconds);
       if (status.ok() && !cache_.insert(asset))
         status = Status::ResourceExhausted(
             fmt::format("UploadMeshChunk.data: the parsed mesh needs {} bytes, more than the whole asset cache ({} bytes)",
@@ -279,9 +340,18 @@ grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
       dst->set_z(src.z);
     }
   }
-  spdlog::info("UploadMesh peer={} name='{}' bytes={} id={} cached={} mesh=[{}] time={:.3f}s status={}",
-               peer, logSafe(h.name()), data.size(), asset ? asset->id.substr(0, 17) : "-", cached,
-               asset ? asset->mesh_report.summary() : "", since(t0), statusText(status));
+  const double seconds = since(t0);
+  callLine("UploadMesh", rid)
+      .text("peer", peer)
+      .quoted("name", logSafe(h.name()))
+      .number("bytes", uint64_t(data.size()))
+      .text("id", asset ? asset->id.substr(0, 17) : "-")
+      .flag("cached", cached)
+      .text("mesh", "[" + (asset ? asset->mesh_report.summary() : std::string()) + "]")
+      .seconds("time", seconds)
+      .status(status)
+      .write();
+  uploadEnded(Rpc::kUploadMesh, status, call.get(), data.size(), seconds);
   return toGrpcStatus(status);
 }
 
@@ -289,9 +359,11 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
                                                 grpc::ServerReader<v1::UploadVolumeChunk>* reader,
                                                 v1::UploadReply* reply) {
   const auto t0 = Clock::now();
+  const RequestId rid = takeRequestId(context);
   const std::string peer = context->peer();
   std::unique_ptr<ActiveCalls::Call> call;
   std::string data;
+  uint64_t received = 0;  // `data` moves into the parse
   v1::UploadVolumeChunk first;
   MemoryBudget::Reservation buffer;
   std::shared_ptr<const Asset> asset;
@@ -316,15 +388,22 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
   if (status.ok())
     status = readUpload(context, reader, *call, "UploadVolumeChunk", check_header, &data, &first, &buffer);
   const v1::UploadVolumeHeader& h = first.header();
+  received = data.size();
   if (status.ok()) {
     if ((asset = cache_.find(volumeAssetId(h.dims(), data)))) {
       cached = true;
     } else {
+      double parse_seconds = -1;
       status = computeAdmitted(context, *call, volumeParsePeakBytes(data.size()),
                                fmt::format("analysing the volume ({} voxels)", data.size()), [&] {
-                                 return parseVolumeAsset(h.dims(), std::move(data), h.name(), "UploadVolumeChunk.header",
-                                                         options_.max_voxels_per_query, &call->interrupter(), &asset);
+                                 const auto p0 = Clock::now();
+                                 Status s = parseVolumeAsset(h.dims(), std::move(data), h.name(),
+                                                             "UploadVolumeChunk.header", options_.max_voxels_per_query,
+                                                             &call->interrupter(), &asset);
+                                 parse_seconds = since(p0);
+                                 return s;
                                });
+      if (parse_seconds >= 0) metrics_.uploadParsed(Rpc::kUploadVolume, parse_seconds);
       if (status.ok() && !cache_.insert(asset))
         status = Status::ResourceExhausted(
             fmt::format("UploadVolumeChunk.data: the volume needs {} bytes, more than the whole asset cache ({} bytes)",
@@ -339,17 +418,28 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
     reply->mutable_volume_dims()->set_y(uint32_t(asset->dims.y));
     reply->mutable_volume_dims()->set_z(uint32_t(asset->dims.z));
   }
-  spdlog::info("UploadVolume peer={} name='{}' dims={}x{}x{} id={} cached={} time={:.3f}s status={}", peer,
-               logSafe(h.name()), h.dims().x(), h.dims().y(), h.dims().z(), asset ? asset->id.substr(0, 19) : "-",
-               cached, since(t0), statusText(status));
+  const double seconds = since(t0);
+  callLine("UploadVolume", rid)
+      .text("peer", peer)
+      .quoted("name", logSafe(h.name()))
+      .text("dims", fmt::format("{}x{}x{}", h.dims().x(), h.dims().y(), h.dims().z()))
+      .text("id", asset ? asset->id.substr(0, 19) : "-")
+      .flag("cached", cached)
+      .seconds("time", seconds)
+      .status(status)
+      .write();
+  uploadEnded(Rpc::kUploadVolume, status, call.get(), received, seconds);
   return toGrpcStatus(status);
 }
 
 grpc::Status DistanceFieldService::GetInfo(grpc::ServerContext* context, const v1::GetInfoRequest*,
                                            v1::ServerInfo* r) {
+  const auto t0 = Clock::now();
+  const RequestId rid = takeRequestId(context);
   std::unique_ptr<ActiveCalls::Call> call;
   if (Status s = admitCall(context, "GetInfo", &call); !s.ok()) {
-    spdlog::info("GetInfo peer={} status={}", context->peer(), statusText(s));
+    callLine("GetInfo", rid).text("peer", context->peer()).status(s).write();
+    metrics_.callEnded(Rpc::kGetInfo, toGrpcCode(s.code()), since(t0));
     return toGrpcStatus(s);
   }
   r->set_version(DISTBAND_VERSION);
@@ -378,7 +468,8 @@ grpc::Status DistanceFieldService::GetInfo(grpc::ServerContext* context, const v
     r->set_replicas(uint32_t(pool_->replicas().size()));
     r->set_tile_voxels(options_.tile_voxels);
   }
-  spdlog::info("GetInfo peer={} status=OK", context->peer());
+  callLine("GetInfo", rid).text("peer", context->peer()).status(Status::Ok()).write();
+  metrics_.callEnded(Rpc::kGetInfo, grpc::StatusCode::OK, since(t0));
   return grpc::Status::OK;
 }
 
@@ -387,23 +478,27 @@ grpc::Status DistanceFieldService::Query(grpc::ServerContext* context, const v1:
   QueryRecord record;
   record.received = Clock::now();
   record.id = fmt::format("q{}", next_query_.fetch_add(1));
+  const RequestId rid = takeRequestId(context);
+  record.request_id = rid.id;
   std::unique_ptr<ActiveCalls::Call> call;
   Status status = admitCall(context, "Query", &call);
   if (status.ok()) {
-    status = runQuery(context, *call, *request, writer, &record);
+    status = runQuery(context, *call, *request, writer, rid, &record);
   } else {
-    spdlog::info("Query {} peer={} status={}", record.id, context->peer(), statusText(status));
+    callLine("Query", rid, "query", record.id).text("peer", context->peer()).status(status).write();
   }
   record.code = toGrpcCode(status.code());
   record.message = status.message();
   record.finished = Clock::now();
+  metrics_.callEnded(Rpc::kQuery, record.code,
+                     std::chrono::duration<double>(record.finished - record.received).count());
   if (hooks_.on_query_end) hooks_.on_query_end(record);
   return toGrpcStatus(status);
 }
 
 Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls::Call& call,
                                       const v1::QueryRequest& request, grpc::ServerWriter<v1::QueryReply>* writer,
-                                      QueryRecord* record) {
+                                      const RequestId& rid, QueryRecord* record) {
   const auto t0 = record->received;
   const std::string peer = context->peer();
   Interrupter& interrupter = call.interrupter();
@@ -412,10 +507,17 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
   std::string label = "-";
   Grid grid;
   double limit = 0, segment = 0;
-  auto log = [&](const Status& s, const std::string& extra) {
-    spdlog::info("Query {} peer={} seeds={} grid={}x{}x{} h={:g} limit={:g} segment={:g} {} time={:.3f}s status={}",
-                 record->id, peer, label, grid.dims().x, grid.dims().y, grid.dims().z, grid.voxelSize(),
-                 limit, segment, extra, since(t0), statusText(s));
+  std::string window;  // a tile's
+  auto log = [&](const Status& s, const std::function<void(LogLine&)>& extra) {
+    LogLine line = callLine("Query", rid, "query", record->id);
+    line.text("peer", peer).text("seeds", label);
+    if (!window.empty()) line.text("tile_window", window);
+    line.text("grid", fmt::format("{}x{}x{}", grid.dims().x, grid.dims().y, grid.dims().z))
+        .real("h", grid.voxelSize())
+        .real("limit", limit)
+        .real("segment", segment);
+    if (extra) extra(line);
+    line.seconds("time", since(t0)).status(s).write();
     return s;
   };
 
@@ -424,18 +526,18 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
   if (pool_ && request.has_tile())
     return log(Status::InvalidArgument("tile: this server is a coordinator and makes its own tiles; send tiles to a "
                                        "replica, or the whole query here"),
-               "");
-  if (Status s = checkInlineMesh(request, options_); !s.ok()) return log(s, "");
+               {});
+  if (Status s = checkInlineMesh(request, options_); !s.ok()) return log(s, {});
   if (request.seeds_case() == v1::QueryRequest::kMesh)
     if (Status s = parseMeshAdmitted(context, call, request.mesh().data(), request.mesh().format(), "inline mesh",
-                                     "mesh", &inline_mesh);
+                                     "mesh", &inline_mesh, nullptr);
         !s.ok())
-      return log(s, "");
-  if (Status s = resolveQuery(request, options_, cache_, std::move(inline_mesh), &q); !s.ok()) return log(s, "");
+      return log(s, {});
+  if (Status s = resolveQuery(request, options_, cache_, std::move(inline_mesh), &q); !s.ok()) return log(s, {});
   label = q.seeds_label;
   if (q.tile)
-    label += fmt::format(" tile window={}x{}x{}@{},{},{}", q.tile->window.dims.x, q.tile->window.dims.y,
-                         q.tile->window.dims.z, q.tile->window.min.x, q.tile->window.min.y, q.tile->window.min.z);
+    window = fmt::format("{}x{}x{}@{},{},{}", q.tile->window.dims.x, q.tile->window.dims.y, q.tile->window.dims.z,
+                         q.tile->window.min.x, q.tile->window.min.y, q.tile->window.min.z);
   grid = q.grid;
   limit = q.plan.limit_world;
   segment = q.plan.segment_length_world;
@@ -448,25 +550,39 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
   ComputeSlot slot;
   const std::string what = fmt::format("the query ({}x{}x{} voxels, at most {} within the limit; {})", grid.dims().x,
                                        grid.dims().y, grid.dims().z, q.touched_voxels_bound, q.memory.summary());
-  if (Status s = admitWork(context, call, peak, what, &memory, &slot); !s.ok()) return log(s, "");
+  const auto admission_began = Clock::now();
+  metrics_.queryQueued(1);
+  Status admitted = admitWork(context, call, peak, what, &memory, &slot);
+  metrics_.queryQueued(-1);
+  metrics_.queryAdmitted(since(admission_began));
+  if (!admitted.ok()) return log(admitted, {});
+  const RunningQuery running(metrics_);
   record->reserved_bytes = memory.bytes();
   const double queue_seconds = since(t0);
 
+  bool sent_bricks = false;
   auto write = [&](const v1::QueryReply& m) {
     call.waitingForClient(true);
     const bool ok = writer->Write(m);
     call.waitingForClient(false);
+    if (ok && metrics_.on()) {
+      metrics_.querySentBytes(uint64_t(m.GetCachedSize()));  // sized when gRPC serialized it
+      if (!sent_bricks && m.has_bricks()) {
+        sent_bricks = true;
+        metrics_.queryFirstBrick(since(t0));
+      }
+    }
     return ok;
   };
   {
     v1::QueryReply header;
     fillQueryHeader(q, record->id, header.mutable_header());
     if (!write(header))
-      return log(interrupter.interrupted() ? interrupter.status() : Status::Cancelled("the client went away"), "");
+      return log(interrupter.interrupted() ? interrupter.status() : Status::Cancelled("the client went away"), {});
   }
   std::unique_ptr<QueryStream> job;
   if (pool_) {
-    TiledQuery::Config config{options_, *pool_, call.interrupter(), context->deadline()};
+    TiledQuery::Config config{options_, *pool_, call.interrupter(), context->deadline(), metrics_, rid.id};
     job = std::make_unique<TiledQuery>(std::move(q), config);
   } else {
     job = std::make_unique<QueryJob>(std::move(q), arena_.get(), options_.stream_buffer_bytes, &interrupter);
@@ -504,15 +620,22 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
   record->segments = s->segments_size();
   record->tiles = job->tiles();
   record->tile_retries = job->retries();
-  const std::string stats =
-      fmt::format("{} messages={} reserved={}", job->logStats(), messages, humanBytes(memory.bytes()));
+  metrics_.querySentVoxels(s->voxels());
+  const auto stats = [&](LogLine& line) {
+    job->logStats(line);
+    line.number("messages", messages).text("reserved", humanBytes(memory.bytes()));
+  };
   if (interrupter.interrupted()) {
     if (record->cancel_seen == Clock::time_point{}) record->cancel_seen = Clock::now();
     const double stop_ms =
         std::chrono::duration<double, std::milli>(record->engine_stopped - record->cancel_seen).count();
-    return log(interrupter.status(), fmt::format("{} engine_stop_after_cancel={:.1f}ms", stats, stop_ms));
+    return log(interrupter.status(), [&](LogLine& line) {
+      stats(line);
+      line.real("engine_stop_after_cancel", stop_ms, "{:.1f}ms");
+    });
   }
   if (!job->status().ok()) return log(job->status(), stats);
+  if (!pool_) metrics_.queryComputed(s->seed_seconds(), s->compute_seconds());
 
   s->set_messages(messages + 1);
   s->set_queue_seconds(queue_seconds);

@@ -16,7 +16,12 @@
 //     a mesh says) under the same admission as queries.
 //   * Errors are core Status values mapped to gRPC codes in one place (server/grpc_status.h).
 //   * beginShutdown(): new calls get UNAVAILABLE; stopAll() cancels the running ones (end of the grace period).
-//   * Every call ends with one spdlog line (method, peer, outcome, sizes, timings).
+//   * Every call has a request id (server/request_id.h: the client's x-request-id or a generated one), echoed in its
+//     initial metadata, passed to replicas, and in every log line of the call.
+//   * Every call ends with one log line (server/log_line.h: method, request id, peer, outcome, sizes, timings) and
+//     its reports to Metrics (server/metrics.h: the call by code and its duration; a query's admission wait, first
+//     brick, seed and compute time, voxels and bytes sent; an upload's bytes, parse time and refusal reason).
+//     Gauges of the service's state (streams, budget, cache, replicas) are read at scrape time.
 // Thread-safe.
 #pragma once
 
@@ -32,8 +37,10 @@
 #include "server/active_calls.h"
 #include "server/asset_cache.h"
 #include "server/memory_budget.h"
+#include "server/metrics.h"
 #include "server/query_slots.h"
 #include "server/replica_pool.h"
+#include "server/request_id.h"
 #include "server/server_options.h"
 #include "server/token_auth.h"
 
@@ -51,8 +58,9 @@ struct MemoryPlan {
 
 class DistanceFieldService final : public v1::DistanceField::Service {
  public:
-  /// `auth` may be null (no token required).
-  DistanceFieldService(const ServerOptions& options, ServerHooks hooks, std::unique_ptr<TokenAuth> auth);
+  /// `auth` may be null (no token required). `metrics` (disabled or not) must outlive the service.
+  DistanceFieldService(const ServerOptions& options, ServerHooks hooks, std::unique_ptr<TokenAuth> auth,
+                       Metrics& metrics);
   ~DistanceFieldService() override;
 
   grpc::Status UploadMesh(grpc::ServerContext* context, grpc::ServerReader<v1::UploadMeshChunk>* reader,
@@ -109,17 +117,21 @@ class DistanceFieldService final : public v1::DistanceField::Service {
   Status readUpload(grpc::ServerContext* context, grpc::ServerReader<Chunk>* reader, ActiveCalls::Call& call,
                     const char* what, const std::function<Status(const Chunk&, uint64_t*)>& on_header,
                     std::string* data, Chunk* first, MemoryBudget::Reservation* reservation);
-  /// Parses a mesh under admission (budget + slot) and the call's Interrupter.
+  /// Parses a mesh under admission (budget + slot) and the call's Interrupter; `parse_seconds` (may be null) gets
+  /// the parse's own time.
   Status parseMeshAdmitted(grpc::ServerContext* context, ActiveCalls::Call& call, std::string_view bytes,
                            v1::MeshFormat format, const std::string& name, std::string_view field,
-                           std::shared_ptr<const Asset>* asset);
+                           std::shared_ptr<const Asset>* asset, double* parse_seconds);
   Status runQuery(grpc::ServerContext* context, ActiveCalls::Call& call, const v1::QueryRequest& request,
-                  grpc::ServerWriter<v1::QueryReply>* writer, QueryRecord* record);
+                  grpc::ServerWriter<v1::QueryReply>* writer, const RequestId& request_id, QueryRecord* record);
+  /// An upload's reports to Metrics when its handler ends.
+  void uploadEnded(Rpc rpc, const Status& status, const ActiveCalls::Call* call, uint64_t bytes, double seconds);
 
   const ServerOptions options_;
   const ServerHooks hooks_;
   const std::unique_ptr<TokenAuth> auth_;
   const MemoryPlan plan_;
+  Metrics& metrics_;
   std::unique_ptr<tbb::task_arena> arena_;
   std::unique_ptr<ReplicaPool> pool_;  ///< set when coordinating
   AssetCache cache_;

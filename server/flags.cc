@@ -69,6 +69,9 @@ void addServerFlags(CLI::App& app, ServerOptions* o) {
                  "(health checks do not)")
       ->check(CLI::ExistingFile);
   app.add_flag("--reflection", o->reflection, "serve gRPC server reflection (off by default)");
+  app.add_option("--metrics-listen", o->metrics_listen,
+                 "serve Prometheus metrics at http://ADDR/metrics, ADDR = IPV4:PORT (or [IPV6]:PORT where civetweb "
+                 "has IPv6; port 0: any free port); its own port, no token: keep it on loopback or behind a network policy (off by default)");
   // Coordinator: one query over many replicas (docs/scale-out.md).
   app.add_option("--peers", o->peers,
                  "act as a coordinator: split queries into tiles computed by these replicas, a gRPC target "

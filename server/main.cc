@@ -16,6 +16,7 @@
 #include <spdlog/spdlog.h>
 
 #include "server/flags.h"
+#include "server/log_line.h"
 #include "server/server.h"
 
 int main(int argc, char** argv) {
@@ -25,6 +26,11 @@ int main(int argc, char** argv) {
   distband::addServerFlags(app, &options);
   std::string log_level = "info";
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error, off")->capture_default_str();
+  std::string log_format = "text";
+  app.add_option("--log-format", log_format,
+                 "text, or json: one JSON object a line with the text's fields (docs/operations.md)")
+      ->check(CLI::IsMember({"text", "json"}))
+      ->capture_default_str();
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -35,6 +41,9 @@ int main(int argc, char** argv) {
     return 2;
   }
   spdlog::set_level(spdlog::level::from_str(log_level));
+  distband::LogFormat format = distband::LogFormat::kText;
+  distband::parseLogFormat(log_format, &format);
+  distband::setLogFormat(format);
 
   // Handle SIGINT/SIGTERM on this thread: block them everywhere before any other thread starts.
   sigset_t signals;

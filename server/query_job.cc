@@ -104,10 +104,14 @@ void QueryJob::summarize(v1::QuerySummary* s) const {
   }
 }
 
-std::string QueryJob::logStats() const {
-  return fmt::format("segments={} voxels={} bricks={} MB={:.1f} seeds={:.3f}s compute={:.3f}s enc={}",
-                     result_.segments.size(), voxels_sent_, bricks_sent_, value_bytes_ / 1e6, seed_seconds_,
-                     result_.seconds, query_.encoding == v1::BRICK_ENCODING_FLOAT16 ? "f16" : "f32");
+void QueryJob::logStats(LogLine& line) const {
+  line.number("segments", uint64_t(result_.segments.size()))
+      .number("voxels", voxels_sent_)
+      .number("bricks", bricks_sent_)
+      .real("MB", value_bytes_ / 1e6, "{:.1f}")
+      .seconds("seed_time", seed_seconds_)  // "seeds" is the query's seeds already
+      .seconds("compute", result_.seconds)
+      .text("enc", query_.encoding == v1::BRICK_ENCODING_FLOAT16 ? "f16" : "f32");
 }
 
 void QueryJob::emitChunk(SegmentBricks&& chunk) {

@@ -49,7 +49,7 @@ class QueryJob final : public QueryStream {
   bool interrupted() const override { return result_.interrupted; }
   Clock::time_point stopped() const override { return engine_stopped_; }
   void summarize(v1::QuerySummary* summary) const override;
-  std::string logStats() const override;
+  void logStats(LogLine& line) const override;
   const FieldRunResult& result() const { return result_; }
   Clock::time_point started() const { return started_; }
 

@@ -17,6 +17,7 @@
 #include "core/status.h"
 #include "distband/v1/distband.pb.h"
 #include "server/bounded_queue.h"
+#include "server/log_line.h"
 
 namespace distband {
 
@@ -38,8 +39,8 @@ class QueryStream {
   /// Tiles the query was split into and tile attempts retried (a coordinator's; 0 for a query computed here).
   virtual int tiles() const { return 0; }
   virtual int retries() const { return 0; }
-  /// The log line's figures ("segments=.. voxels=.. ...").
-  virtual std::string logStats() const = 0;
+  /// Adds the figures of the query's log line (segments, voxels, ...).
+  virtual void logStats(LogLine& line) const = 0;
 };
 
 }  // namespace distband

@@ -9,6 +9,7 @@
 
 #include <fmt/format.h>
 
+#include "grpc/health/v1/health.grpc.pb.h"
 #include "server/token_auth.h"
 
 namespace distband {
@@ -168,8 +169,16 @@ std::vector<ReplicaPool::Replica> ReplicaPool::replicas() {
     auto old = std::find_if(replicas_.begin(), replicas_.end(), [&](const Replica& r) { return r.address == a; });
     fresh.push_back({a, old != replicas_.end() ? old->channel : makeChannel(a, false)});
   }
+  const bool changed = fresh.size() != replicas_.size() ||
+                       !std::equal(fresh.begin(), fresh.end(), replicas_.begin(),
+                                   [](const Replica& a, const Replica& b) { return a.address == b.address; });
   replicas_ = std::move(fresh);
   resolved_at_ = now;
+  if (changed && on_resolved_) {
+    std::vector<std::string> addresses;
+    for (const Replica& r : replicas_) addresses.push_back(r.address);
+    on_resolved_(addresses);
+  }
   if (name_list_) {
     std::vector<std::string> addresses;
     for (const Replica& r : replicas_) addresses.push_back(r.address);
@@ -185,6 +194,43 @@ std::vector<ReplicaPool::Replica> ReplicaPool::replicas() {
 size_t ReplicaPool::lastReplicaCount() const {
   std::lock_guard lock(mu_);
   return replicas_.size();
+}
+
+ReplicaPool::~ReplicaPool() {
+  {
+    std::lock_guard lock(health_mu_);
+    health_stop_ = true;
+  }
+  health_cv_.notify_all();
+  if (health_thread_.joinable()) health_thread_.join();
+}
+
+void ReplicaPool::onResolved(ResolvedCallback callback) {
+  std::lock_guard lock(mu_);
+  on_resolved_ = std::move(callback);
+}
+
+void ReplicaPool::watchHealth(std::chrono::milliseconds interval) {
+  if (health_thread_.joinable()) return;
+  health_thread_ = std::thread([this, interval] { healthRounds(interval); });
+}
+
+void ReplicaPool::healthRounds(std::chrono::milliseconds interval) {
+  for (;;) {
+    size_t serving = 0;
+    for (const Replica& r : replicas()) {
+      grpc::ClientContext context;
+      context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(1));
+      grpc::health::v1::HealthCheckRequest request;
+      request.set_service("distband.v1.DistanceField");
+      grpc::health::v1::HealthCheckResponse response;
+      const grpc::Status s = grpc::health::v1::Health::NewStub(r.channel)->Check(&context, request, &response);
+      if (s.ok() && response.status() == grpc::health::v1::HealthCheckResponse::SERVING) ++serving;
+    }
+    healthy_.store(serving);
+    std::unique_lock lock(health_mu_);
+    if (health_cv_.wait_for(lock, interval, [&] { return health_stop_; })) return;
+  }
 }
 
 void ReplicaPool::prepare(grpc::ClientContext* context, std::chrono::system_clock::time_point deadline) const {

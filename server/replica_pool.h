@@ -12,13 +12,21 @@
 //     reach every replica because round_robin decides where each tile runs).
 //   * prepare() adds the call credentials (--peer-token-file) and a deadline to a ClientContext. TLS to the
 //     replicas with --peer-ca (and --peer-tls-name when certificates do not name the addresses).
+//   * onResolved() hears every resolution that changes the addresses (the metrics drop a departed replica's
+//     series); watchHealth() starts a thread that asks every replica's grpc.health.v1 service
+//     ("distband.v1.DistanceField", 1 s deadline) each interval, for healthyReplicas(). Both are for the metrics and
+//     set before the pool is used; the thread stops when the pool is destroyed.
 // Thread-safe.
 #pragma once
 
+#include <atomic>
 #include <chrono>
+#include <condition_variable>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
@@ -48,8 +56,19 @@ class ReplicaPool {
   void prepare(grpc::ClientContext* context, std::chrono::system_clock::time_point deadline) const;
   const std::string& target() const { return target_; }
 
+  using ResolvedCallback = std::function<void(const std::vector<std::string>& addresses)>;
+  /// `callback` is called, under the pool's lock (it must not call the pool), after each resolution that changed
+  /// the addresses.
+  void onResolved(ResolvedCallback callback);
+  void watchHealth(std::chrono::milliseconds interval);
+  /// Replicas that answered SERVING at the last health round (0 before the first, or without watchHealth()).
+  size_t healthyReplicas() const { return healthy_.load(); }
+
+  ~ReplicaPool();
+
  private:
   ReplicaPool() = default;
+  void healthRounds(std::chrono::milliseconds interval);
   std::shared_ptr<grpc::Channel> makeChannel(const std::string& target, bool round_robin) const;
 
   std::string target_;
@@ -62,6 +81,12 @@ class ReplicaPool {
   mutable std::mutex mu_;
   std::chrono::steady_clock::time_point resolved_at_{};
   std::vector<Replica> replicas_;
+  ResolvedCallback on_resolved_;
+  std::atomic<size_t> healthy_{0};
+  std::mutex health_mu_;
+  std::condition_variable health_cv_;
+  bool health_stop_ = false;
+  std::thread health_thread_;
 };
 
 /// The addresses a target names, each as a single-address gRPC target ("ipv4:a:p" / "ipv6:[a]:p"); DNS names are

@@ -11,6 +11,7 @@
 #include "core/mesh/ply_writer.h"
 #include "server/asset_parsing.h"
 #include "server/grpc_status.h"
+#include "server/log_line.h"
 
 namespace distband {
 namespace {
@@ -206,7 +207,12 @@ Status SeedShipper::uploadToReplicas(const std::string& id, TileDispatcher& call
       ++present;
     } else {
       last_error = fmt::format("{}: {} {}", r.address, Status::codeName(s.code()), s.message());
-      spdlog::warn("coordinator: uploading {} to replica {} failed: {}", id.substr(0, 17), r.address, last_error);
+      LogLine("SeedUpload")
+          .text("request_id", calls.requestId())
+          .text("asset", id.substr(0, 17))
+          .text("replica", r.address)
+          .status(s)
+          .write(spdlog::level::warn);
     }
   }
   // A replica that missed it answers NOT_FOUND to a tile, which uploads again and retries.

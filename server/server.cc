@@ -67,8 +67,16 @@ grpc::Status DistbandServer::start() {
     if (Status s = TokenAuth::load(options_.auth_token_file, &auth); !s.ok()) return toGrpcStatus(s);
   std::shared_ptr<grpc::ServerCredentials> credentials;
   if (Status s = serverCredentials(options_, &credentials); !s.ok()) return toGrpcStatus(s);
-  service_ = std::make_unique<DistanceFieldService>(options_, hooks_, std::move(auth));
+  metrics_ = options_.metrics_listen.empty() ? Metrics::disabled() : Metrics::enabled();
+  service_ = std::make_unique<DistanceFieldService>(options_, hooks_, std::move(auth), *metrics_);
   if (Status s = service_->connectPeers(); !s.ok()) return toGrpcStatus(s);
+  if (metrics_->on()) {
+    if (Status s = MetricsEndpoint::start(options_.metrics_listen, *metrics_, &metrics_endpoint_); !s.ok())
+      return toGrpcStatus(s);
+    // Before the listening line, which tools wait for ("(port N,"): the metrics port is known by then.
+    spdlog::info("metrics: http://{}/metrics (port {}; Prometheus text format, no token: keep the address private)",
+                 options_.metrics_listen, metrics_endpoint_->port());
+  }
 
   grpc::EnableDefaultHealthCheckService(true);
   if (options_.reflection) grpc::reflection::InitProtoReflectionServerBuilderPlugin();

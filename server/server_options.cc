@@ -11,6 +11,8 @@
 
 #include <fmt/format.h>
 
+#include "server/metrics.h"
+
 namespace distband {
 namespace {
 
@@ -92,6 +94,16 @@ std::string ServerOptions::validate() const {
   if (peers.empty() && !(peer_ca_file.empty() && peer_tls_name.empty() && peer_token_file.empty()))
     return "--peer-ca, --peer-tls-name and --peer-token-file need --peers";
   if (!peer_tls_name.empty() && peer_ca_file.empty()) return "--peer-tls-name needs --peer-ca (TLS to the replicas)";
+  if (!metrics_listen.empty()) {
+    int port = 0;
+    if (!validMetricsAddress(metrics_listen, &port))
+      return fmt::format("--metrics-listen '{}' must be IPV4:PORT or [IPV6]:PORT (an address literal, e.g. "
+                         "127.0.0.1:9100)",
+                         metrics_listen);
+    const size_t colon = listen_address.rfind(':');
+    if (port != 0 && colon != std::string::npos && listen_address.substr(colon + 1) == std::to_string(port))
+      return "--metrics-listen must use another port than --listen (the metrics never share the gRPC port)";
+  }
   const uint64_t budget = resolvedMemoryBudget();
   if (budget < (uint64_t(64) << 20)) return fmt::format("--memory-budget must be at least 64 MiB (got {})", budget);
   if (resolvedCacheBytes() > budget / 2)

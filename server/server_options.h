@@ -46,6 +46,9 @@ struct ServerOptions {
   std::string tls_client_ca_file;           ///< PEM; set = clients must present a certificate it signed (mTLS)
   std::string auth_token_file;  ///< one bearer token a line; set = every DistanceField call needs one
   bool reflection = false;      ///< serve grpc.reflection.v1alpha (the schema is public, but off unless asked)
+  /// IPV4:PORT or [IPV6]:PORT: serve Prometheus metrics at http://ADDR/metrics (server/metrics.h); empty = off.
+  /// Its own port, no token: where it listens is its protection.
+  std::string metrics_listen;
 
   // Coordinator (server/tiled_query.h): with `peers` set, queries are split into tiles computed by the replicas.
   std::string peers;             ///< gRPC target naming the replicas (server/replica_pool.h); empty = compute here
@@ -76,6 +79,7 @@ uint64_t processMemoryLimitBytes();
 struct QueryRecord {
   using Clock = std::chrono::steady_clock;
   std::string id;
+  std::string request_id;  ///< x-request-id (server/request_id.h)
   grpc::StatusCode code = grpc::StatusCode::OK;
   std::string message;
   bool engine_ran = false;        ///< the engine was started

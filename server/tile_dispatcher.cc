@@ -9,6 +9,8 @@
 #include <spdlog/spdlog.h>
 
 #include "server/grpc_status.h"
+#include "server/log_line.h"
+#include "server/request_id.h"
 
 namespace distband {
 namespace {
@@ -36,6 +38,7 @@ TileDispatcher::TileDispatcher(Config config, Tiles& tiles) : config_(config), t
 TileDispatcher::Call::Call(TileDispatcher& dispatcher, grpc::ClientContext* context)
     : dispatcher_(dispatcher), context_(context) {
   dispatcher_.config_.pool.prepare(context_, dispatcher_.tileDeadline());
+  if (!dispatcher_.config_.request_id.empty()) context_->AddMetadata(kRequestIdHeader, dispatcher_.config_.request_id);
   std::lock_guard lock(dispatcher_.mu_);
   dispatcher_.calls_.insert(context_);
 }
@@ -115,6 +118,7 @@ TileDispatcher::Attempt TileDispatcher::runTile(size_t index) {
     return attempt;
   }
   auto reader = stub->Query(&context, *request);
+  attempt.called = true;
   request.reset();
   v1::QueryReply message;
   while (reader->Read(&message)) {
@@ -156,6 +160,7 @@ void TileDispatcher::worker(const std::vector<TilePlan>& plans) {
     else a = runTile(index);
     if (a.asset_missing && !stopping())
       if (Status s = tiles_.reship(); !s.ok()) a.status = s;
+    if (a.called) config_.metrics.tileDispatched(a.peer);
     std::lock_guard lock(mu_);
     --running_;
     if (!status_.ok()) {
@@ -167,11 +172,18 @@ void TileDispatcher::worker(const std::vector<TilePlan>& plans) {
       TileAttempts& t = attempts_[index];
       tiles_.onAttemptFailed(index);
       if (!a.peer.empty()) t.failed_on.insert(a.peer);
-      if (retriable(a.status.code()) && t.attempts < config_.options.tile_retries) {
+      const bool retry = retriable(a.status.code()) && t.attempts < config_.options.tile_retries;
+      if (a.called) config_.metrics.tileFailed(a.peer, retry);
+      if (retry) {
         ++t.attempts;
         ++retries_;
-        spdlog::warn("coordinator: tile {} attempt {} failed on {} ({} {}); retrying", index, t.attempts,
-                     a.peer.empty() ? "?" : a.peer, Status::codeName(a.status.code()), a.status.message());
+        LogLine("TileRetry")
+            .text("request_id", config_.request_id)
+            .number("tile", uint64_t(index))
+            .number("attempt", t.attempts)
+            .text("replica", a.peer.empty() ? "?" : a.peer)
+            .status(a.status)
+            .write(spdlog::level::warn);
         pending_.push_back(index);
       } else {
         const VoxelBox& b = plans[index].deliver;

@@ -16,8 +16,10 @@
 //     re-ships the seeds first) is retried up to --tile-retries times; beyond them, or on another code, the query
 //     fails with UNAVAILABLE (INTERNAL for a code not worth retrying) naming the tile and the last error. A failed
 //     attempt loses nothing when everything its tile had to deliver was already merged: the tile is then done.
-//   * Call is how any other call of the query (the seeds' uploads) is prepared (credentials, deadline) and made
-//     cancellable with the tile calls.
+//   * Call is how any other call of the query (the seeds' uploads) is prepared (credentials, deadline, the query's
+//     x-request-id) and made cancellable with the tile calls.
+//   * Every tile call is reported to Metrics by the replica it reached (dispatched; failed, and whether it is
+//     retried); a retry's log line carries the query's request id.
 // Thread-safe. The Tiles methods marked "locked" are called under the dispatcher's lock, one at a time, and only
 // while the query has not failed; the others from workers, without it.
 #pragma once
@@ -37,6 +39,7 @@
 #include "core/interrupter.h"
 #include "core/status.h"
 #include "distband/v1/distband.pb.h"
+#include "server/metrics.h"
 #include "server/replica_pool.h"
 #include "server/server_options.h"
 
@@ -49,6 +52,8 @@ class TileDispatcher {
     ReplicaPool& pool;
     Interrupter& interrupter;
     std::chrono::system_clock::time_point client_deadline;
+    Metrics& metrics;
+    std::string request_id;  ///< sent to the replicas as x-request-id (server/request_id.h)
   };
 
   /// The query whose tiles are dispatched.
@@ -73,7 +78,8 @@ class TileDispatcher {
     virtual Status reship() = 0;
   };
 
-  /// Keeps a call prepared (credentials, the tile deadline) and cancelled with the query's calls for its scope.
+  /// Keeps a call prepared (credentials, the tile deadline, the request id) and cancelled with the query's calls for
+  /// its scope.
   class Call {
    public:
     Call(TileDispatcher& dispatcher, grpc::ClientContext* context);
@@ -97,6 +103,8 @@ class TileDispatcher {
   /// Why calls must not start now (the Interrupter's status, or CANCELLED after stop()); OK while they may.
   Status stopReason() const;
 
+  const std::string& requestId() const { return config_.request_id; }
+
   /// After run(): OK, or the query's first error.
   const Status& status() const { return status_; }
   int retries() const;
@@ -109,6 +117,7 @@ class TileDispatcher {
   struct Attempt {
     Status status;
     bool asset_missing = false;
+    bool called = false;  ///< a call was made (it reached a replica or tried to)
     std::string peer;  ///< the replica it ran on (as gRPC names it, e.g. "ipv4:10.0.0.1:50051")
   };
 

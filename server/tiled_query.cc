@@ -75,6 +75,9 @@ void TiledQuery::run() {
   if (status.ok()) status = shipper_->ship(dispatcher_);
   if (status.ok()) dispatcher_.run(plans_, replicas_);
   else dispatcher_.fail(status);
+  // Every worker has ended: what the merger still holds is freed with the query.
+  config_.metrics.mergeBufferChanged(-int64_t(reported_held_bytes_));
+  reported_held_bytes_ = 0;
   interrupted_ = config_.interrupter.interrupted();
   stopped_ = Clock::now();
   queue_.close();
@@ -106,7 +109,19 @@ std::optional<v1::QueryRequest> TiledQuery::request(size_t tile) {
   return r;
 }
 
+void TiledQuery::reportHeldBytes() {
+  const uint64_t held = merger_->heldBytes();
+  config_.metrics.mergeBufferChanged(int64_t(held) - int64_t(reported_held_bytes_));
+  reported_held_bytes_ = held;
+}
+
 Status TiledQuery::onReply(size_t tile, v1::QueryReply& m) {
+  const Status s = merge(tile, m);
+  reportHeldBytes();
+  return s;
+}
+
+Status TiledQuery::merge(size_t tile, v1::QueryReply& m) {
   switch (m.kind_case()) {
     case v1::QueryReply::kHeader: {
       const v1::Dims& d = m.header().dims();
@@ -131,13 +146,18 @@ void TiledQuery::summarize(v1::QuerySummary* s) const {
   if (merger_) merger_->summarize(s);
 }
 
-std::string TiledQuery::logStats() const {
+void TiledQuery::logStats(LogLine& line) const {
   v1::QuerySummary s;
   summarize(&s);
-  return fmt::format("tiles={} replicas={} retries={} segments={} voxels={} bricks={} MB={:.1f} tile_seeds={:.3f}s "
-                     "tile_compute={:.3f}s",
-                     plans_.size(), replicas_, dispatcher_.retries(), s.segments_size(), s.voxels(), s.bricks(),
-                     s.value_bytes() / 1e6, s.seed_seconds(), s.compute_seconds());
+  line.number("tiles", uint64_t(plans_.size()))
+      .number("replicas", uint64_t(replicas_))
+      .number("retries", dispatcher_.retries())
+      .number("segments", s.segments_size())
+      .number("voxels", s.voxels())
+      .number("bricks", s.bricks())
+      .real("MB", s.value_bytes() / 1e6, "{:.1f}")
+      .seconds("tile_seeds", s.seed_seconds())
+      .seconds("tile_compute", s.compute_seconds());
 }
 
 }  // namespace distband

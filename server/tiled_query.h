@@ -20,6 +20,8 @@
 //     replicas compute deterministically, so the field is the same. Beyond the retries: UNAVAILABLE naming the tile
 //     and the last error.
 //   * The call's Interrupter (client cancel, deadline, shutdown) cancels every tile call within a poll (5 ms).
+//   * Metrics: the bytes the merger holds are reported as they change (distband_coordinator_merge_buffer_bytes) and
+//     given back when the query ends; tile calls are reported by the dispatcher.
 // Parts: SeedShipper (server/seed_shipper.h) ships the seeds and fills each tile's seeds, TileDispatcher
 // (server/tile_dispatcher.h) runs the tile calls with their retries, SegmentMerger (server/segment_merger.h) merges
 // their streams; TiledQuery plans the tiles, builds their requests and wires the three on its own thread.
@@ -59,7 +61,7 @@ class TiledQuery final : public QueryStream, private TileDispatcher::Tiles {
   bool interrupted() const override { return interrupted_; }
   Clock::time_point stopped() const override { return stopped_; }
   void summarize(v1::QuerySummary* summary) const override;
-  std::string logStats() const override;
+  void logStats(LogLine& line) const override;
   int tiles() const override { return int(plans_.size()); }
   int retries() const override { return dispatcher_.retries(); }
 
@@ -76,10 +78,20 @@ class TiledQuery final : public QueryStream, private TileDispatcher::Tiles {
   Status onReply(size_t tile, v1::QueryReply& reply) override;
   bool sawLastSegment(size_t tile) const override { return merger_->sawLastSegment(tile); }
   bool everythingMerged(size_t tile) const override { return merger_->everythingMerged(tile); }
-  void onTileDone(size_t tile) override { merger_->onTileFinished(tile); }
-  void onAttemptFailed(size_t tile) override { merger_->onAttemptFailed(tile); }
+  void onTileDone(size_t tile) override {
+    merger_->onTileFinished(tile);
+    reportHeldBytes();
+  }
+  void onAttemptFailed(size_t tile) override {
+    merger_->onAttemptFailed(tile);
+    reportHeldBytes();
+  }
   bool complete() const override { return merger_->complete(); }
   Status reship() override;
+  /// onReply's merge of one message.
+  Status merge(size_t tile, v1::QueryReply& reply);
+  /// Reports the change of the merger's held bytes since the last report (under the dispatcher's lock).
+  void reportHeldBytes();
 
   const ResolvedQuery query_;
   const Config config_;
@@ -91,6 +103,7 @@ class TiledQuery final : public QueryStream, private TileDispatcher::Tiles {
   std::optional<SeedShipper> shipper_;
   std::optional<SegmentMerger> merger_;
   size_t replicas_ = 0;
+  uint64_t reported_held_bytes_ = 0;
   bool interrupted_ = false;
   Clock::time_point started_{}, stopped_{};
 };
