@@ -94,6 +94,30 @@ MeshSeedOptions FieldPlan::meshSeedOptions(const Grid& grid) const {
   return o;
 }
 
+Status planSign(const FieldRequest& r, const MeshReport* mesh_report, SignPlan* out) {
+  SignPlan p;
+  switch (r.seeds) {
+    case SeedKind::kPoints:
+      if (r.inside_negative) return Status::InvalidArgument("sign: point seeds are unsigned");
+      p.reason = "points are unsigned";
+      break;
+    case SeedKind::kVolume:
+      p.inside_negative = r.inside_negative;
+      p.reason = r.inside_negative ? "requested" : "default";
+      break;
+    case SeedKind::kMesh:
+      if (r.inside_negative) return Status::InvalidArgument("sign: mask-inside is for volume seeds");
+      if (!mesh_report) throw std::invalid_argument("planSign: a mesh's sign needs its report");
+      p.mesh_sign = resolveSignMethod(r.mesh_sign.value_or(kDefaultMeshSign), *mesh_report, &p.reason);
+      break;
+  }
+  if (r.seeds != SeedKind::kMesh && r.mesh_sign && *r.mesh_sign != SignMethod::kUnsigned &&
+      *r.mesh_sign != SignMethod::kAuto)
+    return Status::InvalidArgument(fmt::format("sign: {} is for meshes", signMethodName(*r.mesh_sign)));
+  *out = std::move(p);
+  return Status::Ok();
+}
+
 Status planField(const FieldRequest& r, const Grid& grid, const MeshReport* mesh_report, FieldPlan* out) {
   FieldPlan p;
   p.seeds = r.seeds;
@@ -101,24 +125,11 @@ Status planField(const FieldRequest& r, const Grid& grid, const MeshReport* mesh
   // Meshes in exact mode propagate triangle sites; paper mode and the other seeds propagate points.
   p.sites = r.seeds == SeedKind::kMesh && p.mode == PropagationMode::kExact ? SiteKind::kTriangle : SiteKind::kPoint;
   p.stencil = r.stencil.value_or(defaultStencil(p.sites));
-  switch (r.seeds) {
-    case SeedKind::kPoints:
-      if (r.inside_negative) return Status::InvalidArgument("sign: point seeds are unsigned");
-      p.sign_reason = "points are unsigned";
-      break;
-    case SeedKind::kVolume:
-      p.inside_negative = r.inside_negative;
-      p.sign_reason = r.inside_negative ? "requested" : "default";
-      break;
-    case SeedKind::kMesh:
-      if (r.inside_negative) return Status::InvalidArgument("sign: mask-inside is for volume seeds");
-      if (!mesh_report) throw std::invalid_argument("planField: a mesh's sign needs its report");
-      p.mesh_sign = resolveSignMethod(r.mesh_sign.value_or(kDefaultMeshSign), *mesh_report, &p.sign_reason);
-      break;
-  }
-  if (r.seeds != SeedKind::kMesh && r.mesh_sign && *r.mesh_sign != SignMethod::kUnsigned &&
-      *r.mesh_sign != SignMethod::kAuto)
-    return Status::InvalidArgument(fmt::format("sign: {} is for meshes", signMethodName(*r.mesh_sign)));
+  SignPlan sign;
+  if (Status st = planSign(r, mesh_report, &sign); !st.ok()) return st;
+  p.mesh_sign = sign.mesh_sign;
+  p.inside_negative = sign.inside_negative;
+  p.sign_reason = std::move(sign.reason);
   p.limit_world = r.limit_voxels > 0 ? r.limit_voxels * grid.voxelSize() : r.limit_world;
   p.segment_length_world = r.segment_length_world;
   p.closest_features = r.closest_features;

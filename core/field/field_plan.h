@@ -109,6 +109,16 @@ struct FieldPlan {
 /// kInvalidArgument saying which names the seeds take.
 Status requestSign(std::string_view name, FieldRequest* request);
 
+/// The sign a request's seeds get — planField's rule, and the point queries' (core/points/point_plan.h): meshes
+/// the requested method or kDefaultMeshSign, resolved on the mesh's edges (resolveSignMethod); points unsigned;
+/// volumes unsigned unless inside_negative. kInvalidArgument for a sign the seeds do not take.
+struct SignPlan {
+  SignMethod mesh_sign = SignMethod::kUnsigned;  ///< meshes: the method in force (never kAuto)
+  bool inside_negative = false;                  ///< volumes
+  std::string reason;                            ///< why ("auto: the mesh is closed", "requested", ...)
+};
+Status planSign(const FieldRequest& request, const MeshReport* mesh_report, SignPlan* out);
+
 /// `mesh_report`: the loaded mesh's report (needed for meshes: the automatic sign reads its edges), else null.
 Status planField(const FieldRequest& request, const Grid& grid, const MeshReport* mesh_report, FieldPlan* plan);
 

@@ -25,6 +25,8 @@ class WindingNumber {
   double query(const Vec3d& p) const;
   /// The exact sum over all triangles (O(T)); for checks.
   double exact(const Vec3d& p) const;
+  /// Bytes held (for memory budgets).
+  uint64_t memoryBytes() const { return tris_.capacity() * sizeof(tris_[0]) + nodes_.capacity() * sizeof(Node); }
 
  private:
   struct Node {

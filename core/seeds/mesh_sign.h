@@ -1,0 +1,89 @@
+// MeshSign: which side of a triangle mesh a point lies on, by one of the sign methods — the one sign test of every
+// caller: the grid path (core/seeds/mesh_seeds.h signs each delivered brick with it) and point queries
+// (core/points/point_query.h sign each query point with it).
+// Contract:
+//   * The methods (SignMethod) and their names are defined here; kAuto is resolved on the mesh's edges by
+//     resolveSignMethod before anything is built.
+//   * build() takes the mesh's vertices in the caller's frame (index space for a grid, world space for point queries)
+//     and its triangles, and builds what the method needs, polling `interrupter` (then it returns its status):
+//       - kPseudonormal: angle-weighted pseudonormals of faces, edges and vertices (Bærentzen & Aanæs 2005), exact for
+//         closed, consistently oriented meshes; the test needs the point's closest triangle and distance.
+//       - kWinding: the generalized winding number (core/mesh/winding_number.h), inside where it exceeds 0.5; robust
+//         on open meshes.
+//       - kParity: Embree rays in 3 fixed directions, inside where the majority cross the surface an odd number of
+//         times.
+//   * inside(p, triangle, distance) is the test for one point: `triangle` is p's closest triangle and `distance` its
+//     distance to it, both in the frame (only kPseudonormal reads them: needsClosestTriangle()).
+//   * signBrick() is the grid's batched form of the same test: it negates the values of a brick's delivered voxels
+//     that lie inside, saving most tests (a voxel far from the surface signs its whole brick; for winding and parity a
+//     voxel at distance d decides the voxels within d - 1 of it).
+// Immutable once built; every query is thread-safe.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/brick.h"
+#include "core/interrupter.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/status.h"
+#include "core/types.h"
+
+namespace distband {
+
+/// kAuto (the default for meshes, decided here once): kPseudonormal for a closed mesh, kWinding for an open one;
+/// resolve it with resolveSignMethod before a sign is built.
+enum class SignMethod { kAuto, kPseudonormal, kWinding, kParity, kUnsigned };
+inline constexpr SignMethod kDefaultMeshSign = SignMethod::kAuto;
+/// Every method, the default first.
+inline constexpr SignMethod kSignMethods[] = {SignMethod::kAuto, SignMethod::kPseudonormal, SignMethod::kWinding,
+                                              SignMethod::kParity, SignMethod::kUnsigned};
+
+std::string_view signMethodName(SignMethod method);
+/// "auto", "pseudonormal", "winding", "parity", "unsigned"
+bool parseSignMethod(std::string_view name, SignMethod* method);
+
+/// The method `requested` stands for on a mesh with this report: kAuto becomes kPseudonormal when the mesh is
+/// closed (the pseudonormal test is exact there and the cheapest), else kWinding (the pseudonormal test gives
+/// wrong-sign patches near an open mesh's holes); other methods are returned as they are. `reason` (may be null)
+/// gets why, for users: e.g. "auto: the mesh is open (312 boundary edges)", or "requested".
+SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std::string* reason);
+
+class MeshSign {
+ public:
+  /// `method` must be kPseudonormal, kWinding or kParity. kInvalidArgument for another method or a corner out of
+  /// range, kInternal when Embree cannot be started (parity), the interrupter's status when it stopped the build.
+  static Status build(std::vector<Vec3d> vertices, const std::vector<std::array<uint32_t, 3>>& triangles,
+                      SignMethod method, const Interrupter* interrupter, std::unique_ptr<MeshSign>* out);
+  ~MeshSign();
+  MeshSign(const MeshSign&) = delete;
+  MeshSign& operator=(const MeshSign&) = delete;
+
+  SignMethod method() const { return method_; }
+  bool needsClosestTriangle() const { return method_ == SignMethod::kPseudonormal; }
+  /// Whether p lies inside; `triangle` and `distance` (p's closest triangle and its distance, in the frame) are read
+  /// by the pseudonormal test only.
+  bool inside(const Vec3d& p, uint32_t triangle, double distance) const;
+
+  /// Negates the delivered values of `brick` (index space, voxel (x, y, z) at the point (x, y, z); values in world
+  /// units, `voxel_size` per index unit) that lie inside. `sites[i]` is the site of voxel offset i (kNoSite: none);
+  /// `site_triangle` maps a site to its triangle (null: the site is the triangle).
+  void signBrick(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size) const;
+
+  /// Bytes held (for memory budgets).
+  uint64_t memoryBytes() const;
+  /// An upper bound on memoryBytes() and on the build's peak for a mesh of this size.
+  static uint64_t estimateBytes(SignMethod method, uint64_t vertices, uint64_t triangles);
+
+ private:
+  struct Tables;
+  explicit MeshSign(SignMethod method);
+  SignMethod method_;
+  std::unique_ptr<Tables> tables_;
+};
+
+}  // namespace distband
