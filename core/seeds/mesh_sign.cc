@@ -6,6 +6,7 @@
 #include <limits>
 #include <mutex>
 #include <numbers>
+#include <tuple>
 #include <unordered_map>
 
 #include <embree3/rtcore.h>
@@ -285,20 +286,39 @@ void MeshSign::Tables::buildBoundaryDistances() {
   if (open.empty()) return;
   std::sort(open.begin(), open.end());
   open.erase(std::unique(open.begin(), open.end()), open.end());
-  auto cellOf = [](const Vec3d& p) {
-    return Coord{int(std::floor(p.x / kCell)), int(std::floor(p.y / kCell)), int(std::floor(p.z / kCell))};
+  auto cellOf = [](const Vec3d& p, double size) {
+    return Coord{int(std::floor(p.x / size)), int(std::floor(p.y / size)), int(std::floor(p.z / size))};
   };
   std::unordered_map<Coord, std::vector<Vec3d>, CoordHash> cells;
-  for (uint32_t v : open) cells[cellOf(verts[v])].push_back(verts[v]);
+  for (uint32_t v : open) cells[cellOf(verts[v], kCell)].push_back(verts[v]);
+  // One search per brick-sized box that holds a triangle's centroid (a thin band's surface has far fewer of those
+  // than triangles): the distance from the box to the nearest open vertex bounds it from every centroid inside.
+  constexpr double kBox = 8;
+  std::vector<Coord> boxes(nt);
   tbb::parallel_for(size_t(0), nt, [&](size_t t) {
     const auto& c = corners[t];
-    const Vec3d p = (verts[c[0]] + verts[c[1]] + verts[c[2]]) * (1.0 / 3.0);
-    const Coord home = cellOf(p);
+    boxes[t] = cellOf((verts[c[0]] + verts[c[1]] + verts[c[2]]) * (1.0 / 3.0), kBox);
+  });
+  std::vector<Coord> unique_boxes = boxes;
+  auto less = [](const Coord& a, const Coord& b) { return std::tie(a.z, a.y, a.x) < std::tie(b.z, b.y, b.x); };
+  tbb::parallel_sort(unique_boxes.begin(), unique_boxes.end(), less);
+  unique_boxes.erase(std::unique(unique_boxes.begin(), unique_boxes.end()), unique_boxes.end());
+  std::vector<double> box_distance(unique_boxes.size());
+  tbb::parallel_for(size_t(0), unique_boxes.size(), [&](size_t b) {
+    const Vec3d lo{unique_boxes[b].x * kBox, unique_boxes[b].y * kBox, unique_boxes[b].z * kBox};
+    const Vec3d centre = lo + Vec3d{kBox / 2, kBox / 2, kBox / 2};
+    auto toBox2 = [&](const Vec3d& q) {
+      const double dx = std::max({lo.x - q.x, 0.0, q.x - lo.x - kBox});
+      const double dy = std::max({lo.y - q.y, 0.0, q.y - lo.y - kBox});
+      const double dz = std::max({lo.z - q.z, 0.0, q.z - lo.z - kBox});
+      return dx * dx + dy * dy + dz * dz;
+    };
+    const Coord home = cellOf(centre, kCell);
     double best2 = std::numeric_limits<double>::infinity();
-    int ring = 0;
-    for (; ring <= kBoundarySearchCells; ++ring) {
-      // Every cell of the ring lies at least (ring - 1) cells away: stop once that exceeds the best found.
-      const double reach = std::max(0, ring - 1) * kCell;
+    for (int ring = 0; ring <= kBoundarySearchCells; ++ring) {
+      // Every cell of the ring lies at least (ring - 1) cells from the home cell, which holds the box's centre:
+      // at least (ring - 1) kCell - kBox / 2 from the box. Stop once that exceeds the best found.
+      const double reach = std::max(0.0, (ring - 1) * kCell - kBox / 2);
       if (reach * reach > best2) break;
       for (int z = -ring; z <= ring; ++z)
         for (int y = -ring; y <= ring; ++y) {
@@ -306,15 +326,20 @@ void MeshSign::Tables::buildBoundaryDistances() {
           for (int x = -ring; x <= ring; x += shell ? 1 : std::max(1, 2 * ring)) {
             const auto it = cells.find(Coord{home.x + x, home.y + y, home.z + z});
             if (it == cells.end()) continue;
-            for (const Vec3d& q : it->second) best2 = std::min(best2, (q - p).lengthSqr());
+            for (const Vec3d& q : it->second) best2 = std::min(best2, toBox2(q));
           }
         }
     }
-    // Nothing within the searched rings: every vertex found later would be at least this far.
-    const double found = std::min(std::sqrt(best2), double(kBoundarySearchCells) * kCell);
+    // Nothing within the searched rings: every vertex found later would be at least this far from the box.
+    box_distance[b] = std::min(std::sqrt(best2), kBoundarySearchCells * kCell - kBox);
+  });
+  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
+    const auto& c = corners[t];
+    const Vec3d p = (verts[c[0]] + verts[c[1]] + verts[c[2]]) * (1.0 / 3.0);
     double reach = 0;  // so that the bound holds from any point of the triangle, not only its centroid
     for (int k = 0; k < 3; ++k) reach = std::max(reach, (verts[c[k]] - p).length());
-    boundary_distance[t] = float(found - reach);
+    const size_t b = std::lower_bound(unique_boxes.begin(), unique_boxes.end(), boxes[t], less) - unique_boxes.begin();
+    boundary_distance[t] = float(box_distance[b] - reach);
   });
 }
 
