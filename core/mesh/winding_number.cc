@@ -7,6 +7,10 @@
 namespace distband {
 namespace {
 constexpr uint32_t kLeafSize = 8;
+// The largest third-order term (times 4 pi) a cluster's expansion may leave out.
+constexpr double kThirdOrderTolerance = 1e-2;
+
+
 Vec3d centroid(const std::array<Vec3d, 3>& t) { return (t[0] + t[1] + t[2]) * (1.0 / 3.0); }
 
 // Van Oosterom–Strackee: a triangle's solid angle seen from the origin is 2 atan2(num, den).
@@ -55,8 +59,18 @@ class AngleSum {
 
 WindingNumber::WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double beta, const Interrupter* interrupter)
     : tris_(std::move(triangles)), beta2_(beta * beta), interrupter_(interrupter) {
+  ids_.resize(tris_.size());
+  for (uint32_t i = 0; i < ids_.size(); ++i) ids_[i] = i;
   nodes_.reserve(2 * tris_.size() / kLeafSize + 2);
   if (!tris_.empty()) build(0, static_cast<uint32_t>(tris_.size()));
+  // The build ordered ids_; put the triangles in the same order (leaves then hold contiguous ranges).
+  std::vector<std::array<Vec3d, 3>> ordered(tris_.size());
+  position_.resize(tris_.size());
+  for (uint32_t i = 0; i < ids_.size(); ++i) {
+    ordered[i] = tris_[ids_[i]];
+    position_[ids_[i]] = i;
+  }
+  tris_ = std::move(ordered);
   interrupter_ = nullptr;
 }
 
@@ -68,12 +82,14 @@ uint32_t WindingNumber::build(uint32_t begin, uint32_t end) {
   Node n{};
   n.begin = begin, n.end = end;
   double total = 0;
-  Vec3d weighted{}, lo = centroid(tris_[begin]), hi = lo;
+  const auto tri = [&](uint32_t i) -> const std::array<Vec3d, 3>& { return tris_[ids_[i]]; };
+  Vec3d weighted{}, lo = centroid(tri(begin)), hi = lo;
   for (uint32_t i = begin; i < end; ++i) {
-    const auto& t = tris_[i];
+    const auto& t = tri(i);
     const Vec3d av = (t[1] - t[0]).cross(t[2] - t[0]) * 0.5;
     const double a = av.length();
     n.area = n.area + av;
+    n.abs_area += a;
     weighted = weighted + centroid(t) * a;
     total += a;
     const Vec3d c = centroid(t);
@@ -81,18 +97,24 @@ uint32_t WindingNumber::build(uint32_t begin, uint32_t end) {
     hi = {std::max(hi.x, c.x), std::max(hi.y, c.y), std::max(hi.z, c.z)};
   }
   n.center = total > 0 ? weighted * (1.0 / total) : (lo + hi) * 0.5;
-  for (uint32_t i = begin; i < end; ++i)
-    for (const Vec3d& v : tris_[i]) n.radius2 = std::max(n.radius2, (v - n.center).lengthSqr());
+  for (uint32_t i = begin; i < end; ++i) {
+    const auto& t = tri(i);
+    for (const Vec3d& v : t) n.radius2 = std::max(n.radius2, (v - n.center).lengthSqr());
+    const Vec3d av = (t[1] - t[0]).cross(t[2] - t[0]) * 0.5, d = centroid(t) - n.center;
+    const double a[3] = {av.x, av.y, av.z}, e[3] = {d.x, d.y, d.z};
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) n.moment[3 * r + c] += a[r] * e[c];
+  }
   if (end - begin > kLeafSize) {
     const Vec3d e = hi - lo;
     const int axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
     const uint32_t mid = begin + (end - begin) / 2;
-    auto key = [axis](const std::array<Vec3d, 3>& t) {
-      const Vec3d c = centroid(t);
+    auto key = [&](uint32_t i) {
+      const Vec3d c = centroid(tris_[i]);
       return axis == 0 ? c.x : (axis == 1 ? c.y : c.z);
     };
-    std::nth_element(tris_.begin() + begin, tris_.begin() + mid, tris_.begin() + end,
-                     [&](const auto& a, const auto& b) { return key(a) < key(b); });
+    std::nth_element(ids_.begin() + begin, ids_.begin() + mid, ids_.begin() + end,
+                     [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
     n.left = build(begin, mid);
     n.right = build(mid, end);
   }
@@ -111,9 +133,16 @@ double WindingNumber::exact(const Vec3d& p) const {
   return sum / (4.0 * std::numbers::pi);
 }
 
-double WindingNumber::query(const Vec3d& p) const {
+double WindingNumber::query(const Vec3d& p) const { return sum(p, UINT32_MAX); }
+
+double WindingNumber::principalValue(uint32_t t) const {
+  const uint32_t at = position_[t];
+  return sum(centroid(tris_[at]), at);
+}
+
+double WindingNumber::sum(const Vec3d& p, uint32_t skip) const {
   if (nodes_.empty()) return 0;
-  double sum = 0;
+  double far = 0;
   AngleSum near;  // the exactly summed triangles' half solid angles
   uint32_t stack[128];
   int top = 0;
@@ -122,16 +151,26 @@ double WindingNumber::query(const Vec3d& p) const {
     const Node& n = nodes_[stack[--top]];
     const Vec3d d = n.center - p;
     const double d2 = d.lengthSqr();
-    if (d2 > beta2_ * n.radius2) {
-      sum += n.area.dot(d) / (d2 * std::sqrt(d2));  // dipole: solid angle of a far area element
+    // Far enough for the expansion: beyond beta radii, and its next (third-order) term, of size
+    // area * radius^2 / distance^4, small enough.
+    if (d2 > beta2_ * n.radius2 && n.abs_area * n.radius2 < kThirdOrderTolerance * d2 * d2) {
+      // Far field of the cluster's area elements a at x: a . (x - p) / |x - p|^3 expanded at the center: the dipole,
+      // then the second-order term trace(J M^T) with J = I / r^3 - 3 r r^T / r^5 (r = center - p).
+      const double inv_r = 1.0 / std::sqrt(d2), inv_r3 = inv_r * inv_r * inv_r;
+      const std::array<double, 9>& m = n.moment;
+      const double r[3] = {d.x, d.y, d.z};
+      double rmr = 0;
+      for (int i = 0; i < 3; ++i) rmr += r[i] * (m[3 * i] * r[0] + m[3 * i + 1] * r[1] + m[3 * i + 2] * r[2]);
+      far += n.area.dot(d) * inv_r3 + ((m[0] + m[4] + m[8]) * inv_r3 - 3.0 * rmr * inv_r3 * inv_r * inv_r);
     } else if (n.left == 0) {
-      for (uint32_t i = n.begin; i < n.end; ++i) near.add(halfAngle(tris_[i], p));
+      for (uint32_t i = n.begin; i < n.end; ++i)
+        if (i != skip) near.add(halfAngle(tris_[i], p));
     } else {
       stack[top++] = n.left;
       stack[top++] = n.right;
     }
   }
-  return (sum + 2.0 * near.radians()) / (4.0 * std::numbers::pi);
+  return (far + 2.0 * near.radians()) / (4.0 * std::numbers::pi);
 }
 
 }  // namespace distband

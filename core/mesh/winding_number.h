@@ -1,10 +1,13 @@
 // WindingNumber: the generalized winding number of a triangle mesh (Jacobson et al. 2013), evaluated with a
-// Barnes–Hut hierarchy (Barill et al. 2018, first-order dipole terms) so a query costs O(log T) instead of O(T).
+// Barnes–Hut hierarchy (Barill et al. 2018: dipole and second-order terms) so a query costs O(log T) instead of O(T).
 // Contract: built once from triangles (any consistent frame, e.g. index space); w(p) is ~1 inside a closed
 // outward-oriented mesh, ~0 outside, and varies smoothly across the holes of an open mesh, so `w > 0.5` is a
-// robust inside test. Clusters farther than `beta` times their radius use their dipole approximation; near
-// clusters are summed exactly (Van Oosterom–Strackee solid angles). Immutable after construction; query() is
-// thread-safe.
+// robust inside test. Clusters farther than `beta` times their radius use their far-field expansion to second
+// order (the truncation error falls as (radius / distance)^3); near clusters are summed exactly (Van
+// Oosterom–Strackee solid angles). principalValue(t) is w on triangle t itself (its own solid angle, 0 there, left
+// out): across a consistently oriented sheet w jumps by 1, from principalValue + 1/2 behind it to principalValue -
+// 1/2 in front. Triangles are named by their index in the constructor's list. Immutable after construction; queries
+// are thread-safe.
 #pragma once
 
 #include <array>
@@ -23,6 +26,8 @@ class WindingNumber {
   explicit WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double beta = 2.0,
                          const Interrupter* interrupter = nullptr);
   double query(const Vec3d& p) const;
+  /// w at triangle t's centroid, t itself left out (the principal value on the surface).
+  double principalValue(uint32_t t) const;
   /// The exact sum over all triangles (O(T)); for checks.
   double exact(const Vec3d& p) const;
   /// Bytes held (for memory budgets).
@@ -32,14 +37,20 @@ class WindingNumber {
   struct Node {
     Vec3d center;     ///< area-weighted centroid of the node's triangles
     Vec3d area;       ///< sum of the triangles' area vectors (0.5 * (b - a) x (c - a))
+    double abs_area;  ///< sum of the triangles' areas
+    /// Second-order moment: sum over the triangles of area vector (x) (centroid - center), row-major.
+    std::array<double, 9> moment;
     double radius2;   ///< squared radius around center enclosing all their corners
     uint32_t begin, end;    ///< triangle range (leaves)
     uint32_t left, right;   ///< children, 0 for a leaf
   };
   uint32_t build(uint32_t begin, uint32_t end);
+  double sum(const Vec3d& p, uint32_t skip) const;
   double solidAngle(const std::array<Vec3d, 3>& t, const Vec3d& p) const;
 
-  std::vector<std::array<Vec3d, 3>> tris_;
+  std::vector<std::array<Vec3d, 3>> tris_;  ///< in hierarchy order
+  std::vector<uint32_t> ids_;               ///< ids_[i]: the constructor's index of tris_[i]
+  std::vector<uint32_t> position_;          ///< position_[id]: where triangle id sits in tris_
   std::vector<Node> nodes_;
   double beta2_;
   const Interrupter* interrupter_ = nullptr;  ///< during the build only

@@ -235,7 +235,10 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
     // 3p. Paper mode: each band voxel's closest point becomes a site of its own.
     seeds.kind = SiteKind::kPoint;
     seeds.points.resize(seeds.band.size());
-    if (options.sign == SignMethod::kPseudonormal) site_triangle->resize(seeds.band.size());
+    // The triangle of each point site: the pseudonormal test reads it, and the winding sign's certificate (a brick's
+    // voxels on one far-from-boundary patch) does.
+    if (options.sign == SignMethod::kPseudonormal || options.sign == SignMethod::kWinding)
+      site_triangle->resize(seeds.band.size());
     seeds.site_feature.resize(seeds.band.size());  // closest features: the triangle of each point site
     tbb::parallel_for(size_t(0), seeds.band.size(), [&](size_t i) {
       if (tbb::is_current_task_group_canceling()) return;

@@ -4,12 +4,17 @@
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <mutex>
+#include <numbers>
+#include <tuple>
+#include <unordered_map>
 
 #include <embree3/rtcore.h>
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
 
 #include "core/geometry.h"
 #include "core/mesh/winding_number.h"
@@ -146,6 +151,11 @@ struct Normal3f {
 /// normal): the plane's sign is the answer, no region tests needed.
 bool planeDecides(double plane, double dist) { return plane * plane >= dist * dist * (1 - 1e-5); }
 
+constexpr float kFarFromBoundary = 1e6f;  // frame units: no boundary anywhere near
+// The winding hierarchy's error bound (kThirdOrderTolerance per cluster, core/mesh/winding_number.cc; measured below
+// 0.011 near open meshes) with room to spare.
+constexpr double kWindingQueryError = 0.03;
+
 }  // namespace
 
 // Everything a method's test needs, immutable once built.
@@ -156,6 +166,10 @@ struct MeshSign::Tables {
   std::unique_ptr<WindingNumber> winding;
   std::unique_ptr<ParityScene> parity;
   uint64_t triangles = 0;
+  /// Winding: per triangle, a lower bound on the distance (frame units) from any of its points to the nearest vertex of
+  /// a boundary or non-manifold edge (capped at kFarFromBoundary), the curves the winding number turns around without
+  /// crossing the surface.
+  std::vector<float> boundary_distance;
 
   /// `dist` is p's distance to triangle t, known to float precision.
   bool insidePseudonormal(const Vec3d& p, uint32_t t, double dist) const {
@@ -182,6 +196,10 @@ struct MeshSign::Tables {
   }
 
   void buildPseudonormals(const Interrupter* interrupter);
+  void buildBoundaryDistances();
+  std::once_flag boundary_once;
+  bool signWindingCertified(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle,
+                            double voxel_size) const;
 };
 
 void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
@@ -240,6 +258,144 @@ void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
   }
 }
 
+// The distance from each triangle to the nearest vertex of an edge not shared by exactly two triangles, searched in a
+// hash grid of those vertices ring by ring out to kBoundarySearchCells cells; a triangle with none that near gets
+// the searched reach, a lower bound, as the certificate needs. Built on the first signed brick, so in the grid's
+// index frame, where a cell is 16 voxels.
+void MeshSign::Tables::buildBoundaryDistances() {
+  constexpr double kCell = 16;
+  constexpr int kBoundarySearchCells = 8;
+  const size_t nt = corners.size();
+  std::vector<uint64_t> edges(3 * nt);
+  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
+    for (int e = 0; e < 3; ++e) {
+      const uint64_t a = corners[t][e], b = corners[t][(e + 1) % 3];
+      edges[3 * t + e] = std::min(a, b) << 32 | std::max(a, b);
+    }
+  });
+  tbb::parallel_sort(edges.begin(), edges.end());
+  std::vector<uint32_t> open;  // vertices of boundary and non-manifold edges
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j] == edges[i]) ++j;
+    if (j - i != 2) open.insert(open.end(), {uint32_t(edges[i] >> 32), uint32_t(edges[i] & 0xFFFFFFFFu)});
+    i = j;
+  }
+  std::vector<uint64_t>().swap(edges);
+  boundary_distance.assign(nt, kFarFromBoundary);
+  if (open.empty()) return;
+  std::sort(open.begin(), open.end());
+  open.erase(std::unique(open.begin(), open.end()), open.end());
+  auto cellOf = [](const Vec3d& p, double size) {
+    return Coord{int(std::floor(p.x / size)), int(std::floor(p.y / size)), int(std::floor(p.z / size))};
+  };
+  std::unordered_map<Coord, std::vector<Vec3d>, CoordHash> cells;
+  for (uint32_t v : open) cells[cellOf(verts[v], kCell)].push_back(verts[v]);
+  // One search per brick-sized box that holds a triangle's centroid (a thin band's surface has far fewer of those
+  // than triangles): the distance from the box to the nearest open vertex bounds it from every centroid inside.
+  constexpr double kBox = 8;
+  std::vector<Coord> boxes(nt);
+  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
+    const auto& c = corners[t];
+    boxes[t] = cellOf((verts[c[0]] + verts[c[1]] + verts[c[2]]) * (1.0 / 3.0), kBox);
+  });
+  std::vector<Coord> unique_boxes = boxes;
+  auto less = [](const Coord& a, const Coord& b) { return std::tie(a.z, a.y, a.x) < std::tie(b.z, b.y, b.x); };
+  tbb::parallel_sort(unique_boxes.begin(), unique_boxes.end(), less);
+  unique_boxes.erase(std::unique(unique_boxes.begin(), unique_boxes.end()), unique_boxes.end());
+  std::vector<double> box_distance(unique_boxes.size());
+  tbb::parallel_for(size_t(0), unique_boxes.size(), [&](size_t b) {
+    const Vec3d lo{unique_boxes[b].x * kBox, unique_boxes[b].y * kBox, unique_boxes[b].z * kBox};
+    const Vec3d centre = lo + Vec3d{kBox / 2, kBox / 2, kBox / 2};
+    auto toBox2 = [&](const Vec3d& q) {
+      const double dx = std::max({lo.x - q.x, 0.0, q.x - lo.x - kBox});
+      const double dy = std::max({lo.y - q.y, 0.0, q.y - lo.y - kBox});
+      const double dz = std::max({lo.z - q.z, 0.0, q.z - lo.z - kBox});
+      return dx * dx + dy * dy + dz * dz;
+    };
+    const Coord home = cellOf(centre, kCell);
+    double best2 = std::numeric_limits<double>::infinity();
+    for (int ring = 0; ring <= kBoundarySearchCells; ++ring) {
+      // Every cell of the ring lies at least (ring - 1) cells from the home cell, which holds the box's centre:
+      // at least (ring - 1) kCell - kBox / 2 from the box. Stop once that exceeds the best found.
+      const double reach = std::max(0.0, (ring - 1) * kCell - kBox / 2);
+      if (reach * reach > best2) break;
+      for (int z = -ring; z <= ring; ++z)
+        for (int y = -ring; y <= ring; ++y) {
+          const bool shell = std::abs(z) == ring || std::abs(y) == ring;
+          for (int x = -ring; x <= ring; x += shell ? 1 : std::max(1, 2 * ring)) {
+            const auto it = cells.find(Coord{home.x + x, home.y + y, home.z + z});
+            if (it == cells.end()) continue;
+            for (const Vec3d& q : it->second) best2 = std::min(best2, toBox2(q));
+          }
+        }
+    }
+    // Nothing within the searched rings: every vertex found later would be at least this far from the box.
+    box_distance[b] = std::min(std::sqrt(best2), kBoundarySearchCells * kCell - kBox);
+  });
+  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
+    const auto& c = corners[t];
+    const Vec3d p = (verts[c[0]] + verts[c[1]] + verts[c[2]]) * (1.0 / 3.0);
+    double reach = 0;  // so that the bound holds from any point of the triangle, not only its centroid
+    for (int k = 0; k < 3; ++k) reach = std::max(reach, (verts[c[k]] - p).length());
+    const size_t b = std::lower_bound(unique_boxes.begin(), unique_boxes.end(), boxes[t], less) - unique_boxes.begin();
+    boundary_distance[t] = float(box_distance[b] - reach);
+  });
+}
+
+// Winding signs at the pseudonormal's price where that is provably the same answer. Across a consistently oriented
+// sheet the winding number jumps by exactly 1 (front w0, behind w0 + 1); away from boundary and non-manifold edges it
+// varies smoothly along either side. So when a brick's voxels all have their closest triangle on one locally oriented
+// patch (no two closest triangles face apart) far from any boundary, one exact query at the voxel nearest the brick's
+// centre fixes w0: if w0 lies well inside (-1/2, 1/2), every voxel in front is outside and every voxel behind is
+// inside, the pseudonormal's answer. Otherwise (near holes, thin or self-intersecting parts, w0 near 1/2) the brick
+// takes a winding query per voxel. The margins cover the turn of the winding number around the boundary curves
+// across the brick and the hierarchy's error.
+bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle,
+                                            double voxel_size) const {
+  auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
+  const auto at = [&](int i) {
+    const Coord c = brick.origin + brickLocal(i);
+    return Vec3d{double(c.x), double(c.y), double(c.z)};
+  };
+  int ref = -1, n = 0;
+  double ref_to_center = std::numeric_limits<double>::infinity(), boundary = kFarFromBoundary;
+  Vec3d normal{};
+  const Vec3d center{brick.origin.x + 3.5, brick.origin.y + 3.5, brick.origin.z + 3.5};
+  for (int w = 0; w < kBrickVoxels / 64; ++w)
+    for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1) {
+      const int i = w * 64 + std::countr_zero(bits);
+      if (sites[i] == kNoSite) return false;
+      const uint32_t t = triangleOf(sites[i]);
+      const Vec3d tn{face_n[t].x, face_n[t].y, face_n[t].z};
+      if (n++ == 0) normal = tn;
+      if (normal.dot(tn) <= 0) return false;  // thin parts: opposite sheets in one brick
+      boundary = std::min(boundary, boundary_distance[t] - std::abs(brick.values[i]) / voxel_size);
+      const double c2 = (at(i) - center).lengthSqr();
+      if (c2 < ref_to_center) ref_to_center = c2, ref = i;
+    }
+  if (ref < 0 || boundary <= 0) return false;
+  double spread2 = 0;  // the farthest voxel from the reference
+  for (int w = 0; w < kBrickVoxels / 64; ++w)
+    for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1)
+      spread2 = std::max(spread2, (at(w * 64 + std::countr_zero(bits)) - at(ref)).lengthSqr());
+  // Off the sheets the winding number turns around a straight boundary edge like theta / (2 pi): by at most
+  // spread / (2 pi boundary) over the brick; twice that for curved and several curves.
+  const double drift = std::sqrt(spread2) / (std::numbers::pi * boundary);
+  if (drift + kWindingQueryError >= 0.5) return false;
+  const bool ref_behind = insidePseudonormal(at(ref), triangleOf(sites[ref]), std::abs(brick.values[ref]) / voxel_size);
+  const double w0 = winding->query(at(ref)) - (ref_behind ? 1.0 : 0.0);  // the front side's value
+  if (std::abs(w0) + drift + kWindingQueryError >= 0.5) return false;
+  for (int w = 0; w < kBrickVoxels / 64; ++w)
+    for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1) {
+      const int i = w * 64 + std::countr_zero(bits);
+      if (i == ref ? ref_behind
+                   : insidePseudonormal(at(i), triangleOf(sites[i]), std::abs(brick.values[i]) / voxel_size))
+        brick.values[i] = -std::abs(brick.values[i]);
+    }
+  return true;
+}
+
 MeshSign::MeshSign(SignMethod method) : method_(method), tables_(std::make_unique<Tables>()) {}
 MeshSign::~MeshSign() = default;
 
@@ -264,10 +420,15 @@ Status MeshSign::build(std::vector<Vec3d> vertices, const std::vector<std::array
       for (size_t t = r.begin(); t != r.end(); ++t)
         for (int k = 0; k < 3; ++k) tris[t][k] = vertices[triangles[t][k]];
     });
-    std::vector<Vec3d>().swap(vertices);
     if (method == SignMethod::kWinding) {
       tables.winding = std::make_unique<WindingNumber>(std::move(tris), 2.0, interrupter);
+      // The certificate that signs most bricks with one query (signWindingCertified) reads pseudonormals, and each
+      // triangle's distance from the boundary, built in the grid's frame on the first signed brick.
+      tables.verts = std::move(vertices);
+      tables.corners = triangles;
+      if (!isInterrupted(interrupter)) tables.buildPseudonormals(interrupter);
     } else {
+      std::vector<Vec3d>().swap(vertices);
       tables.parity = std::make_unique<ParityScene>(tris, interrupter);
       if (!isInterrupted(interrupter) && !tables.parity->ok())
         return Status::Internal("cannot create the Embree device for parity signs");
@@ -339,13 +500,22 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
     });
     return;
   }
-  // Winding number or parity: their sign on an open mesh also changes across its holes, away from the surface, so
-  // no brick is signed by one test. A voxel's distance to the surface is a ball of one sign around it: a later
-  // voxel inside a ball (less a voxel of margin) takes its sign without a query.
+  if (method_ == SignMethod::kWinding) {
+    // Isolated: a thread that waits for the build inside it must not pick up another brick's task meanwhile.
+    std::call_once(tables_->boundary_once, [&] { tbb::this_task_arena::isolate([&] { tables_->buildBoundaryDistances(); }); });
+    if (s.signWindingCertified(brick, sites, site_triangle, voxel_size)) return;
+  }
+  // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
+  // surface. A voxel's distance to the surface is a ball around it that no surface crosses: parity is constant there,
+  // so a later voxel inside the ball (less a voxel of margin) takes its sign without a query. The winding number also
+  // turns around the boundary curves inside such a ball, so it keeps its side of 1/2 only as far as its distance from
+  // 1/2 (less the query's error) covers that turn.
   struct Ball {
     Vec3d c;
     double r2;
     bool inside;
+    double slack;  // winding: |w - 1/2| at c less the query's error
+    double drift;  // winding: the turn per unit of distance from c
   };
   std::vector<Ball> balls;
   for (int i = 0; i < kBrickVoxels; ++i) {
@@ -354,15 +524,26 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
     const Vec3d p{double(c.x), double(c.y), double(c.z)};
     bool in = false;
     bool found = false;
-    for (auto it = balls.rbegin(); it != balls.rend(); ++it)
-      if ((p - it->c).lengthSqr() < it->r2) {
+    for (auto it = balls.rbegin(); it != balls.rend(); ++it) {
+      const double d2 = (p - it->c).lengthSqr();
+      if (d2 < it->r2 && (method_ != SignMethod::kWinding || std::sqrt(d2) * it->drift < it->slack)) {
         in = it->inside, found = true;
         break;
       }
+    }
     if (!found) {
-      in = inside(p, kNoSite, 0);
-      const double r = std::abs(brick.values[i]) / voxel_size - 1.0;
-      if (r > 0) balls.push_back({p, r * r, in});
+      const double dist = std::abs(brick.values[i]) / voxel_size;
+      const double r = dist - 1.0;
+      if (method_ == SignMethod::kWinding) {
+        const double w = s.winding->query(p);
+        in = w > 0.5;
+        const double boundary = sites[i] == kNoSite ? 0 : s.boundary_distance[triangleOf(sites[i])] - dist;
+        if (r > 0 && boundary > 0)
+          balls.push_back({p, r * r, in, std::abs(w - 0.5) - kWindingQueryError, 1.0 / (std::numbers::pi * boundary)});
+      } else {
+        in = s.parity->inside(p);
+        if (r > 0) balls.push_back({p, r * r, in, 0, 0});
+      }
     }
     if (in) brick.values[i] = -std::abs(brick.values[i]);
   }
@@ -372,7 +553,8 @@ uint64_t MeshSign::memoryBytes() const {
   const Tables& t = *tables_;
   uint64_t bytes = sizeof(MeshSign) + sizeof(Tables) + t.verts.capacity() * sizeof(Vec3d) +
                    t.corners.capacity() * sizeof(t.corners[0]) +
-                   (t.face_n.capacity() + t.edge_n.capacity() + t.vertex_n.capacity()) * sizeof(Normal3f);
+                   (t.face_n.capacity() + t.edge_n.capacity() + t.vertex_n.capacity()) * sizeof(Normal3f) +
+                   t.boundary_distance.capacity() * sizeof(float);
   if (t.winding) bytes += t.winding->memoryBytes();
   if (t.parity) bytes += estimateBytes(SignMethod::kParity, 0, t.triangles);
   return bytes;
