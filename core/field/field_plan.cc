@@ -100,7 +100,7 @@ Status planField(const FieldRequest& r, const Grid& grid, const MeshReport* mesh
   p.mode = r.mode.value_or(PropagationMode::kExact);
   // Meshes in exact mode propagate triangle sites; paper mode and the other seeds propagate points.
   p.sites = r.seeds == SeedKind::kMesh && p.mode == PropagationMode::kExact ? SiteKind::kTriangle : SiteKind::kPoint;
-  p.stencil = r.stencil.value_or(defaultStencil(p.sites));
+  p.stencil = r.stencil.value_or(defaultStencil(p.sites, grid.cubic()));
   switch (r.seeds) {
     case SeedKind::kPoints:
       if (r.inside_negative) return Status::InvalidArgument("sign: point seeds are unsigned");
@@ -130,7 +130,7 @@ Status planField(const FieldRequest& r, const Grid& grid, const MeshReport* mesh
   // planes take the separable point EDT over the whole grid; with a limit the band's work follows the limit instead.
   const bool propagation_asked = p.mode != PropagationMode::kExact || r.stencil || r.second_ring;
   const bool separable_applies =
-      !propagation_asked && ((r.seeds == SeedKind::kVolume && !r.closest_features) ||
+      !propagation_asked && ((r.seeds == SeedKind::kVolume && !r.closest_features && grid.cubic()) ||
                              (r.seeds == SeedKind::kPoints && std::isinf(p.limit_world)));
   if (r.algorithm) {
     if (*r.algorithm == FieldAlgorithm::kSeparable && !separable_applies)

@@ -51,7 +51,7 @@ inline constexpr std::string_view kMaskInsideSign = "mask-inside";
 struct FieldRequest {
   SeedKind seeds = SeedKind::kPoints;
   std::optional<PropagationMode> mode;   ///< unset: kExact
-  std::optional<StencilKind> stencil;    ///< unset: defaultStencil(the plan's site kind)
+  std::optional<StencilKind> stencil;    ///< unset: defaultStencil(the plan's site kind, the grid)
   std::optional<SignMethod> mesh_sign;   ///< meshes only; unset: kDefaultMeshSign
   bool inside_negative = false;          ///< volumes only: mask voxels get -distance to the outside
   /// The limit: in voxels of the grid when limit_voxels > 0, else in world units (+infinity: none).

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cstring>
 #include <iterator>
+#include <limits>
 #include <memory>
 
 #include <fmt/format.h>
@@ -115,6 +116,9 @@ Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool 
       const auto& b = slices[size_t(zj)].boundary;
       return first_site[size_t(zj)] + uint32_t(std::lower_bound(b.begin(), b.end(), j) - b.begin());
     };
+    // On an anisotropic grid the nearest of them is along the axis of the smallest scale: the nearest first, then
+    // the lowest id (its site must be offered: propagation never crosses the boundary to bring it).
+    const Vec3d scale = grid.axisScale();
     tbb::parallel_for(0, d.z, [&](int z) {
       if (stop()) return;
       Slice& s = slices[size_t(z)];
@@ -123,16 +127,20 @@ Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool 
         const int x = int(i % sy), y = int((i / sy) % d.y);
         const bool in = inside(i);
         uint32_t best = kNoSite;
+        double best_step = std::numeric_limits<double>::infinity();
         // A 6-neighbour on the other side is itself on the boundary, so it has a site.
-        auto consider = [&](bool ok, int64_t j) {
-          if (ok && inside(j) != in) best = std::min(best, siteOf(j));
+        auto consider = [&](bool ok, int64_t j, double step) {
+          if (!ok || inside(j) == in || step > best_step) return;
+          const uint32_t site = siteOf(j);
+          if (step < best_step || site < best) best = site;
+          best_step = step;
         };
-        consider(x > 0, i - 1);
-        consider(x + 1 < d.x, i + 1);
-        consider(y > 0, i - sy);
-        consider(y + 1 < d.y, i + sy);
-        consider(z > 0, i - sz);
-        consider(z + 1 < d.z, i + sz);
+        consider(x > 0, i - 1, scale.x);
+        consider(x + 1 < d.x, i + 1, scale.x);
+        consider(y > 0, i - sy, scale.y);
+        consider(y + 1 < d.y, i + sy, scale.y);
+        consider(z > 0, i - sz, scale.z);
+        consider(z + 1 < d.z, i + sz, scale.z);
         s.band.push_back({{x, y, z}, best});
       }
     });
@@ -151,7 +159,8 @@ Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool 
   for (size_t z = 0; z < slices.size(); ++z) {
     if (stop()) return interruptedStatus(interrupter);
     Slice& s = slices[z];
-    for (const int64_t i : s.boundary) seeds.points.push_back({double(i % sy), double((i / sy) % d.y), double(z)});
+    for (const int64_t i : s.boundary)
+      seeds.points.push_back(grid.unitsOfIndex({double(i % sy), double((i / sy) % d.y), double(z)}));
     for (BandVoxel v : s.band) {
       if (!signed_distance && v.site != kNoSite) v.site += first_site[z];
       seeds.band.push_back(v);

@@ -70,7 +70,7 @@ bool squaredDistances(const Coord& dims, const std::vector<uint8_t>& mask, bool 
       for (int y = 0; y < ny; ++y) rowPass(m + size_t(y) * nx, seeds_nonzero, s + size_t(y) * nx, nx);
       for (int x = 0; x < nx; ++x) {
         for (int y = 0; y < ny; ++y) col[size_t(y)] = s[size_t(y) * nx + x];
-        parabolaEnvelope(col.data(), res.data(), ny, v.data(), zz.data());
+        parabolaEnvelope(col.data(), res.data(), ny, 1.0, v.data(), zz.data());
         for (int y = 0; y < ny; ++y) s[size_t(y) * nx + x] = res[size_t(y)];
       }
     }
@@ -92,7 +92,7 @@ bool squaredDistances(const Coord& dims, const std::vector<uint8_t>& mask, bool 
           for (int i = 0; i < w; ++i) cols[size_t(i) * nz + z] = row[i];
         }
         for (int i = 0; i < w; ++i) {
-          parabolaEnvelope(cols.data() + size_t(i) * nz, res.data(), nz, v.data(), zz.data());
+          parabolaEnvelope(cols.data() + size_t(i) * nz, res.data(), nz, 1.0, v.data(), zz.data());
           std::copy(res.begin(), res.end(), cols.begin() + ptrdiff_t(size_t(i) * nz));
         }
         for (int z = 0; z < nz; ++z) {
@@ -148,6 +148,7 @@ struct BandSource {
 FieldRunResult computeSeparableVolumeField(const Grid& grid, const std::vector<uint8_t>& mask, bool inside_negative,
                                          const FieldRunOptions& options, const SegmentCallback& on_segment) {
   if (Status s = grid.validate(); !s.ok()) throw std::invalid_argument("grid: " + s.message());
+  if (!grid.cubic()) throw std::invalid_argument("the separable volume EDT needs a cubic grid (for now)");
   if (int64_t(mask.size()) != grid.voxelCount())
     throw std::invalid_argument(
         fmt::format("the mask has {} bytes, the grid {} voxels", mask.size(), grid.voxelCount()));

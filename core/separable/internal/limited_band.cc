@@ -360,7 +360,7 @@ bool squaredDistancesWithin(const Grid& grid, const std::vector<uint8_t>& mask, 
                            any |= s.f[size_t(i)] != kFarSquared;
                          }
                          if (!any) continue;
-                         parabolaEnvelope(s.f.data(), s.d.data(), length, s.v.data(), s.z.data());
+                         parabolaEnvelope(s.f.data(), s.d.data(), length, 1.0, s.v.data(), s.z.data());
                          for (int i = 0; i < length; ++i) at(i, w) = keep(s.d[size_t(i)]);
                        }
                      });
