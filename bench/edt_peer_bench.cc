@@ -122,7 +122,8 @@ Row run(const Case& c, const bench::PlannedField& planned, int threads, int reps
 
   SeedSource source;
   source.points = &points;
-  source.mask = std::shared_ptr<const std::vector<uint8_t>>(&mask, [](const std::vector<uint8_t>*) {});
+  source.volume = LabelVolume({n, n, n}, VoxelType::kUint8,
+                              std::shared_ptr<const std::vector<uint8_t>>(&mask, [](const std::vector<uint8_t>*) {}));
   bench::RunSettings settings;
   settings.threads = threads;
   settings.max_chunk_bricks = 4096;

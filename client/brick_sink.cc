@@ -23,9 +23,11 @@ class NpyBrickSink : public BrickSink {
     if (sign_from_band_) delivered_.assign(size_t(layout.grid.voxelCount()), 0);
     if (layout.signed_distance && layout.inside) {
       std::vector<float>& v = field_.values();
-      const std::vector<uint8_t>& in = *layout.inside;
-      for (size_t i = 0; i < v.size() && i < in.size(); ++i)
-        if (in[i]) v[i] = -layout.background;
+      layout.inside.visit([&](const auto* in) {
+        const size_t n = std::min(v.size(), size_t(layout.inside.voxelCount()));
+        for (size_t i = 0; i < n; ++i)
+          if (in[i]) v[i] = -layout.background;
+      });
     }
   }
   void add(const SegmentBricks& segment) override {

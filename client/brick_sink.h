@@ -20,6 +20,7 @@
 
 #include "core/brick.h"
 #include "core/grid.h"
+#include "core/seeds/label_volume.h"
 #include "core/status.h"
 
 namespace distband {
@@ -28,7 +29,7 @@ struct FieldLayout {
   Grid grid;
   float background = 0;                                ///< value of undelivered voxels (>= 0)
   bool signed_distance = false;
-  std::shared_ptr<const std::vector<uint8_t>> inside;  ///< signed only: dense labels, nonzero = inside (may be null)
+  LabelVolume inside;  ///< signed only: the seed volume, nonzero = inside (may be empty)
   /// Signed without labels (meshes): undelivered voxels take the sign of the nearest delivered voxel along their
   /// x row (the band encloses the surface, so a row enters and leaves the inside through delivered voxels).
   bool sign_from_band = false;

@@ -41,7 +41,7 @@ struct SeedInput {
   GridPadding padding{-1, false};  ///< gridForMesh's; voxels -1 on an explicit lattice
   FieldPlan plan;
   FieldInputs inputs;
-  std::shared_ptr<const std::vector<uint8_t>> mask;  ///< volumes
+  LabelVolume volume;  ///< volumes
   std::string description;                           ///< the seeds and grid, for the header line
 };
 
@@ -89,10 +89,10 @@ Status buildSeedInput(const FieldSpec& spec, const Interrupter* interrupter, See
     if (Status s = loadMesh(spec.source, &mesh, &report); !s.ok()) return s;
     source.mesh = &mesh;
   } else if (spec.seeds == SeedKind::kVolume) {
-    auto mask = std::make_shared<std::vector<uint8_t>>();
-    if (Status s = readNpyMask(spec.source, mask.get(), &volume_dims); !s.ok()) return s;
+    if (Status s = readNpyVolume(spec.source, &in->volume); !s.ok()) return s;
+    volume_dims = in->volume.dims();
     if (std::string e = checkMaskDims(spec, volume_dims); !e.empty()) return Status::InvalidArgument(e);
-    source.mask = in->mask = mask;
+    source.volume = in->volume;
   } else {
     mesh.vertices = spec.points;
     request.point_layout = pointLayout(spec.points);  // the planner's cost model
@@ -219,7 +219,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
             << "\n";
   FieldOutputs outputs(setup.outputs);
   const std::string title = std::filesystem::path(spec.source).filename().string();
-  if (std::string e = outputs.open(describeField(in.plan, in.grid, in.padding, title, in.mask)); !e.empty())
+  if (std::string e = outputs.open(describeField(in.plan, in.grid, in.padding, title, in.volume)); !e.empty())
     return usage(ctx, e);
   printHeader(in, a.threads, ctx);
 

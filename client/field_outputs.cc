@@ -108,12 +108,12 @@ std::string checkOutputFlags(const OutputFlags& f, double limit_world, OutputPla
 }
 
 FieldDescription describeField(const FieldPlan& plan, const Grid& grid, const GridPadding& padding, std::string title,
-                               std::shared_ptr<const std::vector<uint8_t>> inside) {
+                               LabelVolume inside) {
   FieldDescription d;
   d.grid = grid;
   d.limit_world = plan.limit_world;
   d.signed_distance = plan.signedField();
-  d.sign_from_band = d.signed_distance && !inside;
+  d.sign_from_band = d.signed_distance && !bool(inside);
   d.inside = std::move(inside);
   d.stencil = std::string(stencilName(plan.stencil));
   d.mode = std::string(modeName(plan.mode));

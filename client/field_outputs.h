@@ -72,7 +72,7 @@ struct FieldDescription {
   Grid grid;
   double limit_world = 0;  ///< +infinity: no limit
   bool signed_distance = false;
-  std::shared_ptr<const std::vector<uint8_t>> inside;  ///< see FieldLayout
+  LabelVolume inside;  ///< see FieldLayout
   bool sign_from_band = false;                         ///< see FieldLayout
   std::string stencil, mode, sign, sign_reason;
   int padding_voxels = -1;  ///< -1: explicit dims
@@ -83,11 +83,11 @@ struct FieldDescription {
 };
 
 /// What the files say about a field computed by `plan` on `grid`: compute's own plan, or the plan query's stream
-/// header describes. `padding`: gridForMesh's (voxels -1 for an explicit lattice). `inside`: a volume's mask where the
+/// header describes. `padding`: gridForMesh's (voxels -1 for an explicit lattice). `inside`: a volume where the
 /// command holds it (compute), whose labels then sign the field; without it a signed field takes its signs from the
 /// delivered band. `title` leads a slice's title.
 FieldDescription describeField(const FieldPlan& plan, const Grid& grid, const GridPadding& padding, std::string title,
-                               std::shared_ptr<const std::vector<uint8_t>> inside = nullptr);
+                               LabelVolume inside = {});
 
 struct RunOutcome {
   bool complete = true;  ///< false: interrupted (only the committed segments are written)

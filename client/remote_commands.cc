@@ -175,11 +175,10 @@ std::string uploadSeeds(const FieldSpec& spec, RemoteClient& client, const CliCo
     ctx.out << fmt::format("uploaded {}: {} ({} triangles{})\n", spec.source, up.asset_id(), up.mesh().triangles(),
                            up.already_cached() ? ", already cached" : "");
   } else {
-    std::vector<uint8_t> mask;
-    Coord dims;
-    if (Status s = readNpyMask(spec.source, &mask, &dims); !s.ok()) return s.message();
-    if (std::string e = checkMaskDims(spec, dims); !e.empty()) return e;
-    *status = client.uploadVolume(dims, mask, spec.source, &up);
+    LabelVolume volume;
+    if (Status s = readNpyVolume(spec.source, &volume); !s.ok()) return s.message();
+    if (std::string e = checkMaskDims(spec, volume.dims()); !e.empty()) return e;
+    *status = client.uploadVolume(volume, spec.source, &up);
     if (!status->ok()) return {};
     ctx.out << fmt::format("uploaded {}: {}\n", spec.source, up.asset_id());
   }
@@ -458,13 +457,12 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
             if (!args->mesh.empty()) {
               s = client.uploadMeshFile(args->mesh, &up);
             } else {
-              std::vector<uint8_t> mask;
-              Coord dims;
-              if (Status e = readNpyMask(args->volume, &mask, &dims); !e.ok()) {
+              LabelVolume volume;
+              if (Status e = readNpyVolume(args->volume, &volume); !e.ok()) {
                 ctx.err << "distband upload: " << e.message() << "\n";
                 return kExitUsage;
               }
-              s = client.uploadVolume(dims, mask, args->volume, &up);
+              s = client.uploadVolume(volume, args->volume, &up);
             }
             if (!s.ok()) {
               ctx.err << "distband upload: " << describe(s) << "\n";

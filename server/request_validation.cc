@@ -65,7 +65,7 @@ Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, Ass
       q->seed_kind = SeedKind::kVolume;
       q->seeds_label = fmt::format("inline-volume({}x{}x{})", r.volume().dims().x(), r.volume().dims().y(),
                                    r.volume().dims().z());
-      return parseVolumeAsset(r.volume().dims(), r.volume().mask(), "inline volume", "volume",
+      return parseVolumeAsset(r.volume().dims(), r.volume().element_type(), r.volume().mask(), "inline volume", "volume",
                               options.max_voxels_per_query, nullptr, &q->asset);
     }
     case v1::QueryRequest::SEEDS_NOT_SET: break;
@@ -97,11 +97,11 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, con
     if (g.has_dims()) {
       if (Status s = checkDims(g.dims(), "grid.dims"); !s.ok()) return s;
       dims = {int32_t(g.dims().x()), int32_t(g.dims().y()), int32_t(g.dims().z())};
-      if (volume && !tile && !(dims == q.asset->dims))
+      if (volume && !tile && !(dims == q.asset->volume.dims()))
         return invalid(fmt::format("grid.dims ({}x{}x{}) must equal the volume's dims ({}x{}x{}) or be omitted",
-                                   dims.x, dims.y, dims.z, q.asset->dims.x, q.asset->dims.y, q.asset->dims.z));
+                                   dims.x, dims.y, dims.z, q.asset->volume.dims().x, q.asset->volume.dims().y, q.asset->volume.dims().z));
     } else {
-      dims = q.asset->dims;
+      dims = q.asset->volume.dims();
     }
     double h = g.voxel_size();
     if (h == 0) {
@@ -161,10 +161,10 @@ Status resolveTile(const v1::Tile& t, const Grid& grid, ResolvedQuery* q) {
   if (Status s = resolveBox(t.window(), grid, "tile.window", &tile.window); !s.ok()) return s;
   if (Status s = resolveBox(t.deliver(), grid, "tile.deliver", &tile.deliver); !s.ok()) return s;
   if (!tile.window.contains(tile.deliver)) return invalid("tile.deliver must lie inside tile.window");
-  if (q->seed_kind == SeedKind::kVolume && !(q->asset->dims == tile.window.dims))
+  if (q->seed_kind == SeedKind::kVolume && !(q->asset->volume.dims() == tile.window.dims))
     return invalid(fmt::format("volume: a tile's volume covers its window: dims must be {}x{}x{} (got {}x{}x{})",
-                               tile.window.dims.x, tile.window.dims.y, tile.window.dims.z, q->asset->dims.x,
-                               q->asset->dims.y, q->asset->dims.z));
+                               tile.window.dims.x, tile.window.dims.y, tile.window.dims.z, q->asset->volume.dims().x,
+                               q->asset->volume.dims().y, q->asset->volume.dims().z));
   q->tile = tile;
   return Status::Ok();
 }
@@ -220,7 +220,7 @@ void estimateMemory(ResolvedQuery* q) {
     case SeedKind::kVolume:
       counts.volume_seed_voxels = q->asset->footprint->seed_voxels;
       counts.volume_boundary_voxels = q->asset->footprint->boundary_voxels;
-      addVolume(*q->asset->footprint, q->plan.inside_negative, &extent);
+      addVolume(*q->asset->footprint, q->plan.volumeMeasure(), &extent);
       break;
     case SeedKind::kMesh: {
       const TriangleMesh& mesh = *q->asset->mesh;
@@ -348,7 +348,7 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
       !s.ok())
     return s;
   if (q.seed_kind == SeedKind::kVolume && q.plan.inside_negative &&
-      q.asset->footprint->seed_voxels == uint64_t(q.asset->dims.x) * q.asset->dims.y * q.asset->dims.z)
+      q.asset->footprint->seed_voxels == uint64_t(q.asset->volume.dims().x) * q.asset->volume.dims().y * q.asset->volume.dims().z)
     return invalid("sign: SIGN_MODE_MASK_INSIDE needs a zero voxel in the mask (every voxel is inside, so the "
                    "distance to the outside is undefined)");
   if (r.has_tile())

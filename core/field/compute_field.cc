@@ -22,11 +22,11 @@ Status buildFieldInputs(const FieldPlan& plan, const Grid& grid, const VoxelBox*
       if (Status s = makePointSeeds(grid, *source.points, &in.seeds, window); !s.ok()) return s;
       break;
     case SeedKind::kVolume:
-      if (!source.mask) throw std::invalid_argument("buildFieldInputs: a seed volume needs its mask");
-      if (plan.algorithm == FieldAlgorithm::kSeparable) {  // the separable EDT reads the mask itself
-        if (Status s = checkSeedMask(*source.mask, plan.inside_negative); !s.ok()) return s;
-        in.mask = source.mask;
-      } else if (Status s = makeVolumeSeeds(run_grid, *source.mask, plan.inside_negative, &in.seeds, interrupter);
+      if (!source.volume) throw std::invalid_argument("buildFieldInputs: a seed volume needs its volume");
+      if (plan.algorithm == FieldAlgorithm::kSeparable) {  // the separable EDT reads the volume itself
+        if (Status s = checkVolumeMeasure(source.volume, plan.volumeMeasure()); !s.ok()) return s;
+        in.volume = source.volume;
+      } else if (Status s = makeVolumeSeeds(run_grid, source.volume, plan.inside_negative, &in.seeds, interrupter);
                  !s.ok()) {
         return s;
       }
@@ -48,8 +48,8 @@ FieldRunResult computeField(const FieldPlan& plan, const Grid& grid, FieldInputs
   if (plan.algorithm == FieldAlgorithm::kSeparable) {
     switch (plan.seeds) {
       case SeedKind::kVolume:
-        if (!inputs.mask) throw std::invalid_argument("computeField: a separable volume plan needs the seed volume");
-        return computeSeparableVolumeField(grid, *inputs.mask, plan.inside_negative, run, on_segment);
+        if (!inputs.volume) throw std::invalid_argument("computeField: a separable volume plan needs the volume");
+        return computeSeparableVolumeField(grid, inputs.volume, plan.volumeMeasure(), run, on_segment);
       case SeedKind::kPoints: return computeSeparablePointField(grid, inputs.seeds, run, on_segment);
       case SeedKind::kMesh: throw std::invalid_argument("computeField: meshes have no separable plan");
     }

@@ -408,7 +408,7 @@ TEST_F(ResolveQueryTest, CachedVolumeByAssetId) {
   v1::Dims dims;
   setDims(&dims, 16, 16, 16);
   std::shared_ptr<const Asset> asset;
-  ASSERT_TRUE(parseVolumeAsset(dims, blockMask(), "block", "volume", options.max_voxels_per_query, nullptr, &asset).ok());
+  ASSERT_TRUE(parseVolumeAsset(dims, v1::VOXEL_TYPE_UINT8, blockMask(), "block", "volume", options.max_voxels_per_query, nullptr, &asset).ok());
   ASSERT_TRUE(cache.insert(asset));
   v1::QueryRequest r;
   r.set_asset_id(asset->id);

@@ -238,7 +238,7 @@ std::vector<VolumeCase> volumeCases(int n) {
 
 Seeds volumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance) {
   Seeds s;
-  EXPECT_TRUE(IsOk(makeVolumeSeeds(grid, mask, signed_distance, &s)));
+  EXPECT_TRUE(IsOk(makeVolumeSeeds(grid, LabelVolume::ofMask(grid.dims(), mask), signed_distance, &s)));
   return s;
 }
 

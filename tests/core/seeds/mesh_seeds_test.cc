@@ -441,9 +441,9 @@ TEST(MeshSeedsTest, AStoppedInterrupterStopsEverySeedBuilder) {
   const Grid g({0, 0, 0}, 1.0, {64, 64, 64});
   std::vector<uint8_t> mask(size_t(g.voxelCount()), 0);
   mask[1000] = 1;
-  EXPECT_TRUE(IsError(makeVolumeSeeds(g, mask, true, &volume, &stop), Status::Code::kCancelled, "cancelled"));
+  EXPECT_TRUE(IsError(makeVolumeSeeds(g, LabelVolume::ofMask(g.dims(), mask), true, &volume, &stop), Status::Code::kCancelled, "cancelled"));
   Interrupter expired(Interrupter::Clock::now());
-  EXPECT_TRUE(IsError(makeVolumeSeeds(g, mask, true, &volume, &expired), Status::Code::kDeadlineExceeded, "deadline"));
+  EXPECT_TRUE(IsError(makeVolumeSeeds(g, LabelVolume::ofMask(g.dims(), mask), true, &volume, &expired), Status::Code::kDeadlineExceeded, "deadline"));
 }
 
 }  // namespace
