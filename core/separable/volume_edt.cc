@@ -57,7 +57,7 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
     std::vector<C> col(n), res(n);
     std::vector<T> col_labels(n);
     std::vector<int> v(n);
-    std::vector<double> zz(n + 1);
+    std::vector<double> zz(2 * n + 2);
     LabelLineScratch<C> runs{int(n)};
     for (int z = r.begin(); z != r.end(); ++z) {
       if (isInterrupted(interrupter)) return;
@@ -95,7 +95,7 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
     std::vector<C> cols(kColumns * n), res(n);
     std::vector<T> col_labels(multi ? kColumns * n : 0);
     std::vector<int> v(n);
-    std::vector<double> zz(n + 1);
+    std::vector<double> zz(2 * n + 2);
     LabelLineScratch<C> runs{int(n)};
     for (int y = r.begin(); y != r.end(); ++y) {
       if (isInterrupted(interrupter)) return;

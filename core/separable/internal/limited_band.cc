@@ -177,7 +177,7 @@ struct LineScratch {
         labels(size_t(n) + 2 * size_t(reach)),
         runs(n),
         v(size_t(n)),
-        z(size_t(n) + 1),
+        z(2 * size_t(n) + 2),
         lanes(size_t(n) + 2 * size_t(reach)) {}
 };
 

@@ -12,7 +12,7 @@
 //         result does not depend on the order lines are visited in.
 //   * parabolaEnvelope(f, d, n, w2, v, z): d[q] = min_p f[p] + w2 (q - p)^2 over the finite f[p] (Felzenszwalb &
 //     Huttenlocher's lower envelope of parabolas), carrying the winner's label; all far when none is finite. `v` and
-//     `z` are scratch of n and n + 1 entries. f and d must not overlap. O(n). On integer cells w2 must be 1.
+//     `z` are scratch of n and 2 n + 2 entries. f and d must not overlap. O(n). On integer cells w2 must be 1.
 //   * boundaryDistance(i, a, b, left, right, w2): the squared distance from voxel i of a label run [a, b) to the run's
 //     ends, a - 1 when `left` and b when `right` (the voxels of another label beyond them, or the black border), as a
 //     cell without a label; far when neither end counts.
@@ -106,19 +106,21 @@ inline void parabolaEnvelope(const C* f, C* d, int n, double w2, int* v, double*
       z[k + 1] = std::numeric_limits<double>::infinity();
     }
   } else {
+    double* const g = z + n + 1;  // each stacked parabola's f + w2 p^2
+    const double inv_2w2 = 0.5 / w2;
     for (int q = 0; q < n; ++q) {
       if (Ops::isFar(f[q])) continue;
       const double fq = double(Ops::dist(f[q])) + w2 * double(q) * q;
       double s = -std::numeric_limits<double>::infinity();
       while (k >= 0) {
-        const int p = v[k];
-        s = (fq - (double(Ops::dist(f[p])) + w2 * double(p) * p)) / (2.0 * w2 * (q - p));
+        s = (fq - g[k]) * inv_2w2 / double(q - v[k]);
         // Equal crossings keep the earlier parabola (and, tagged, the lower label at an exact tie below).
         if (s > z[k]) break;
         --k;
       }
       ++k;
       v[k] = q;
+      g[k] = fq;
       z[k] = k == 0 ? -std::numeric_limits<double>::infinity() : s;
       z[k + 1] = std::numeric_limits<double>::infinity();
     }

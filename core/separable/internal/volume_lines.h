@@ -57,7 +57,9 @@ struct LabelLineScratch {
   std::vector<C> f, d;
   std::vector<int> v;
   std::vector<double> z;
-  explicit LabelLineScratch(int n = 0) : f(size_t(n)), d(size_t(n)), v(size_t(n)), z(size_t(n) + 1) {}
+  // A run and its two ends: up to n + 2 positions (the band's lines are padded by the reach on the caller's side).
+  explicit LabelLineScratch(int n = 0)
+      : f(size_t(n) + 2), d(size_t(n) + 2), v(size_t(n) + 2), z(2 * size_t(n) + 6) {}
 };
 
 template <class C, class T>
@@ -83,7 +85,16 @@ inline void otherLabelLine(const T* lab, int n, const KnownLabels& known, bool b
     const bool right = b < n + known.after || (known.face_after && black_border);
     if (!f) {
       for (int j = i; j < end; ++j) d[j] = Ops::make(boundaryDistance<D>(j, a, b, left, right, w2), 0);
+    } else if (a == i && b == end) {
+      // The run's ends as parabolas of value 0 at positions -1 and m of the run: one envelope does it all.
+      const int m = end - i;
+      s.f[0] = left ? Ops::make(D(0), 0) : Ops::far();
+      std::copy(f + i, f + end, s.f.begin() + 1);
+      s.f[size_t(m) + 1] = right ? Ops::make(D(0), 0) : Ops::far();
+      parabolaEnvelope(s.f.data(), s.d.data(), m + 2, w2, s.v.data(), s.z.data());
+      std::copy(s.d.begin() + 1, s.d.begin() + 1 + m, d + i);
     } else {
+      // The run reaches past the computed voxels (a band's line): its ends taken afterwards.
       const int m = end - i;
       std::copy(f + i, f + end, s.f.begin());
       parabolaEnvelope(s.f.data(), s.d.data(), m, w2, s.v.data(), s.z.data());
