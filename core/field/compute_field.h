@@ -41,6 +41,9 @@ struct SeedSource {
 struct FieldInputs {
   Seeds seeds;         ///< the band's and the separable point EDT's input
   LabelVolume volume;  ///< the separable volume EDT's input; empty for every other plan
+  /// The faces of the run's grid that are the whole grid's (VolumeMeasure's bits): a tile's window keeps the black
+  /// border only there.
+  uint8_t grid_faces = kAllFaces;
 };
 
 Status buildFieldInputs(const FieldPlan& plan, const Grid& grid, const VoxelBox* window, const SeedSource& source,

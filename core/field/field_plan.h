@@ -106,7 +106,7 @@ struct FieldPlan {
   /// Whether delivered voxels carry a closest feature (closest_features or nearest_label).
   bool hasClosestFeatures() const { return closest_features || nearest_label; }
   /// What a volume run measures.
-  VolumeMeasure volumeMeasure() const { return {labels, inside_negative, black_border}; }
+  VolumeMeasure volumeMeasure() const { return {labels, inside_negative, black_border ? kAllFaces : uint8_t(0)}; }
   double limitVoxels(const Grid& grid) const { return limit_world / grid.voxelSize(); }
   /// The run's options this plan fixes (limit, segments, closest features); threads, interrupter and chunking
   /// belong to the caller's run and are left at their defaults.

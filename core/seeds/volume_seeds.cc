@@ -27,7 +27,7 @@ struct Slice {
 
 Status checkVolumeMeasure(const LabelVolume& volume, const VolumeMeasure& measure) {
   if (measure.labels) {
-    if (!measure.black_border && !volumeHasTwoLabels(volume))
+    if (!measure.black_border && volume.at(0) != 0 && !volumeHasTwoLabels(volume))
       return Status::InvalidArgument(fmt::format(
           "every voxel has label {}: no voxel of another label, so the distance is undefined (a black border gives "
           "the grid's outside label 0)",

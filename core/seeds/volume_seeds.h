@@ -28,16 +28,21 @@
 
 namespace distband {
 
+/// Faces of a grid, as bits: the low (bit 2a) and high (bit 2a + 1) face along axis a (x, y, z).
+inline constexpr uint8_t kAllFaces = 0x3F;
+
 /// What a volume run measures (see the contract).
 struct VolumeMeasure {
   bool labels = false;           ///< the multi-label EDT; false: the seed field
   bool inside_negative = false;  ///< seed field: seeds get -distance to the nearest zero voxel
-  bool black_border = false;     ///< multi-label EDT: the grid's outside is label 0
+  /// Multi-label EDT: the faces beyond which the outside is label 0 (the black border: kAllFaces; a tile of a grid
+  /// keeps only the faces it shares with the grid).
+  uint8_t black_border = 0;
 };
 
 /// OK when the field exists, else kInvalidArgument saying why: the seed field needs a nonzero voxel (and, signed, a
-/// zero one); the multi-label EDT two different labels, or a black border. O(volume) with an early exit; shared by the
-/// band's seeds and the separable EDT.
+/// zero one); the multi-label EDT two different labels, a black border, or only label 0 (all distances 0). O(volume)
+/// with an early exit; shared by the band's seeds and the separable EDT.
 Status checkVolumeMeasure(const LabelVolume& volume, const VolumeMeasure& measure);
 
 Status makeVolumeSeeds(const Grid& grid, const LabelVolume& volume, bool signed_distance, Seeds* out,

@@ -50,7 +50,10 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
   const bool nonzero = measure.seeds_nonzero;
   GridCells<C>& D = *out;
   D.resize(slice * nz);
-  const KnownLabels whole;  // the whole line: its ends are the grid's faces
+  // Whole lines: their ends are the grid's faces.
+  const KnownLabels whole_x = KnownLabels::wholeLine(0, measure.black_border),
+                    whole_y = KnownLabels::wholeLine(1, measure.black_border),
+                    whole_z = KnownLabels::wholeLine(2, measure.black_border);
   // Passes 1 and 2, slice by slice: rows along x, then columns along y inside the (cache-resident) slice.
   tbb::parallel_for(tbb::blocked_range<int>(0, nz), [&](const tbb::blocked_range<int>& r) {
     const size_t n = size_t(std::max(nx, ny));
@@ -66,7 +69,7 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
       for (int y = 0; y < ny; ++y) {
         const T* row = m + size_t(y) * nx;
         if (multi)
-          otherLabelLine<C, T>(row, nx, whole, measure.black_border, nullptr, s + size_t(y) * nx, w2[0], runs);
+          otherLabelLine<C, T>(row, nx, whole_x, nullptr, s + size_t(y) * nx, w2[0], runs);
         else {
           C* out = s + size_t(y) * nx;
           seedLine<C>(
@@ -78,8 +81,7 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
         for (int y = 0; y < ny; ++y) col[size_t(y)] = s[size_t(y) * nx + x];
         if (multi) {
           for (int y = 0; y < ny; ++y) col_labels[size_t(y)] = m[size_t(y) * nx + x];
-          otherLabelLine<C, T>(col_labels.data(), ny, whole, measure.black_border, col.data(), res.data(), w2[1],
-                               runs);
+          otherLabelLine<C, T>(col_labels.data(), ny, whole_y, col.data(), res.data(), w2[1], runs);
         } else {
           parabolaEnvelope(col.data(), res.data(), ny, w2[1], v.data(), zz.data());
         }
@@ -111,8 +113,7 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
         for (int i = 0; i < w; ++i) {
           C* col = cols.data() + size_t(i) * nz;
           if (multi)
-            otherLabelLine<C, T>(col_labels.data() + size_t(i) * nz, nz, whole, measure.black_border, col, col, w2[2],
-                                 runs);
+            otherLabelLine<C, T>(col_labels.data() + size_t(i) * nz, nz, whole_z, col, col, w2[2], runs);
           else {
             parabolaEnvelope(col, res.data(), nz, w2[2], v.data(), zz.data());
             std::copy(res.begin(), res.end(), col);
@@ -195,7 +196,7 @@ bool runCells(const Grid& grid, const T* labels, const VolumeMeasure& measure, c
   const Vec3d& s = grid.axisScale();
   const double w2[3] = {s.x * s.x, s.y * s.y, s.z * s.z};
   const BandMeasure outside_measure{measure.labels, true, measure.black_border};
-  const BandMeasure inside_measure{false, false, false};
+  const BandMeasure inside_measure{false, false, 0};
   const bool signed_field = !measure.labels && measure.inside_negative;
   if (std::isinf(options.limit_world)) {
     GridCells<C> outside;

@@ -314,7 +314,7 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
           int nc[3] = {c[0], c[1], c[2]};
           nc[a] += s;
           if (nc[a] < 0 || nc[a] >= along(bd, a)) {
-            if (measure.black_border) return true;
+            if ((measure.black_border >> (2 * a + (s > 0))) & 1) return true;
             continue;
           }
           const size_t n = size_t(grid.brickIndex({nc[0], nc[1], nc[2]}));
@@ -380,6 +380,8 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
     k.after = std::min(N[axis] - (start + length), reach_voxels[axis]);
     k.face_before = start - k.before == 0;
     k.face_after = start + length + k.after == N[axis];
+    k.border_before = (measure.black_border >> (2 * axis)) & 1;
+    k.border_after = (measure.black_border >> (2 * axis + 1)) & 1;
     return k;
   };
   // Pass 1, along x: each voxel's squared distance to the nearest seed of its row (within the boundary bricks), or,
@@ -398,8 +400,7 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
           const int line = base + w * kStride[2];
           auto at = [&](int i) -> C& { return values[i / kBrickSize][line + (i % kBrickSize) * kStride[0]]; };
           if (multi) {
-            otherLabelLine<C, T>(row, length, knownLabels(0, x0, length), measure.black_border, nullptr, s.d.data(),
-                                 w2[0], s.runs);
+            otherLabelLine<C, T>(row, length, knownLabels(0, x0, length), nullptr, s.d.data(), w2[0], s.runs);
             for (int i = 0; i < length; ++i) at(i) = keep(s.d[size_t(i)]);
           } else {
             const bool nonzero = measure.seeds_nonzero;
@@ -479,8 +480,7 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
               const T* p = labels + (int64_t(c[2]) * dims.y + c[1]) * dims.x + c[0];
               const int total = known.before + length + known.after;
               for (int i = 0; i < total; ++i) s.labels[size_t(i)] = p[i * step];
-              otherLabelLine<C, T>(s.labels.data() + known.before, length, known, measure.black_border, s.f.data(),
-                                   s.d.data(), wa, s.runs);
+              otherLabelLine<C, T>(s.labels.data() + known.before, length, known, s.f.data(), s.d.data(), wa, s.runs);
             } else {
               parabolaEnvelope(s.f.data(), s.d.data(), length, wa, s.v.data(), s.z.data());
             }

@@ -65,7 +65,7 @@ BrickClasses classifyBricks(const Grid& grid, const T* labels, bool multi_label,
 struct BandMeasure {
   bool multi_label = false;
   bool seeds_nonzero = true;  ///< seed field: seeds are the nonzero voxels (false: the zero ones, a signed inside)
-  bool black_border = false;  ///< multi-label: the grid's outside is label 0
+  uint8_t black_border = 0;   ///< multi-label: the faces beyond which the outside is label 0 (VolumeMeasure's)
 };
 
 /// See above. `classes` from classifyBricks; `cut2` >= 0 (squared units); `w2`: the squared axis scales. False when

@@ -10,10 +10,10 @@
 //     voxels [0, n) of a line whose labels lab[i] are known for i in [-known.before, n + known.after). Runs of equal
 //     label are the units: a voxel of label L != 0 looks only at its own run, whose ends count as voxels of another
 //     label at distance 0 — a run end inside the known labels always, one at the grid's face (known.face_before /
-//     face_after) when `black_border`; a run reaching past the known labels is open there (its end is farther than the
-//     caller's reach). Pass 1 (f null): d[i] = w2 (distance to the nearer end)^2. Passes 2 and 3: d[i] = the lower
-//     envelope of f over the run, and the ends. Label-0 voxels get far (their distance, 0, is the caller's). f and d
-//     may be the same array.
+//     face_after) when the black border is on that face (known.border_before / border_after); a run reaching past
+//     the known labels is open there (its end is farther than the caller's reach). Pass 1 (f null): d[i] = w2 (distance
+//     to the nearer end)^2. Passes 2 and 3: d[i] = the lower envelope of f over the run, and the ends. Label-0 voxels
+//     get far (their distance, 0, is the caller's). f and d may be the same array.
 // Exact: a voxel's nearest voxel of another label q is reached through the runs (step from q towards the voxel: the
 // first voxel on the way is of the voxel's label, or a nearer run end), as in edt's proof. Pure; thread-safe (scratch
 // is the caller's).
@@ -45,10 +45,19 @@ inline void seedLine(int n, const IsSeed& is_seed, const LabelOf& label_of, doub
   }
 }
 
-/// How far a line's labels are known beyond the voxels a pass computes, and whether those ends are the grid's faces.
+/// How far a line's labels are known beyond the voxels a pass computes, whether those ends are the grid's faces,
+/// and whether the outside beyond those faces is label 0 (the black border).
 struct KnownLabels {
   int before = 0, after = 0;
   bool face_before = true, face_after = true;
+  bool border_before = false, border_after = false;
+  /// The whole line along `axis` of a grid with the black border on `faces` (VolumeMeasure::black_border).
+  static KnownLabels wholeLine(int axis, uint8_t faces) {
+    KnownLabels k;
+    k.border_before = (faces >> (2 * axis)) & 1;
+    k.border_after = (faces >> (2 * axis + 1)) & 1;
+    return k;
+  }
 };
 
 /// Scratch of otherLabelLine for lines of up to n voxels.
@@ -63,8 +72,8 @@ struct LabelLineScratch {
 };
 
 template <class C, class T>
-inline void otherLabelLine(const T* lab, int n, const KnownLabels& known, bool black_border, const C* f, C* d,
-                           double w2, LabelLineScratch<C>& s) {
+inline void otherLabelLine(const T* lab, int n, const KnownLabels& known, const C* f, C* d, double w2,
+                           LabelLineScratch<C>& s) {
   using Ops = CellOps<C>;
   using D = typename Ops::Dist;
   const T* known_lab = lab - known.before;  // known_lab[j] is voxel j - known.before
@@ -81,8 +90,8 @@ inline void otherLabelLine(const T* lab, int n, const KnownLabels& known, bool b
       continue;
     }
     // A run end inside the known labels is another label; at the grid's face, the black border; else open.
-    const bool left = a > -known.before || (known.face_before && black_border);
-    const bool right = b < n + known.after || (known.face_after && black_border);
+    const bool left = a > -known.before || (known.face_before && known.border_before);
+    const bool right = b < n + known.after || (known.face_after && known.border_after);
     if (!f) {
       for (int j = i; j < end; ++j) d[j] = Ops::make(boundaryDistance<D>(j, a, b, left, right, w2), 0);
     } else if (a == i && b == end) {

@@ -204,14 +204,19 @@ TEST(VolumeSeedsTest, CheckVolumeMeasureFindsALoneVoxelAnywhere) {
     }
   // The multi-label EDT: two labels, or a black border.
   const LabelVolume one({4, 1, 1}, VoxelType::kUint16, std::make_shared<const std::vector<uint8_t>>(8, 3));
-  EXPECT_TRUE(IsError(checkVolumeMeasure(one, {true, false, false}), Status::Code::kInvalidArgument,
-                      "every voxel has label 771"));
-  EXPECT_TRUE(IsOk(checkVolumeMeasure(one, {true, false, true})));
+  EXPECT_TRUE(
+      IsError(checkVolumeMeasure(one, {true, false, 0}), Status::Code::kInvalidArgument, "every voxel has label 771"));
+  // All background: every distance is 0.
+  EXPECT_TRUE(IsOk(
+      checkVolumeMeasure(LabelVolume({4, 1, 1}, VoxelType::kUint16, std::make_shared<const std::vector<uint8_t>>(8, 0)),
+                         {true, false, 0})));
+  EXPECT_TRUE(IsOk(checkVolumeMeasure(one, {true, false, kAllFaces})));
+  EXPECT_TRUE(IsOk(checkVolumeMeasure(one, {true, false, 0x4})));  // a tile's one face on the grid's
   std::vector<uint8_t> two(8, 3);
   two[6] = 4;
-  EXPECT_TRUE(IsOk(checkVolumeMeasure(LabelVolume({4, 1, 1}, VoxelType::kUint16,
-                                                  std::make_shared<const std::vector<uint8_t>>(two)),
-                                      {true, false, false})));
+  EXPECT_TRUE(IsOk(
+      checkVolumeMeasure(LabelVolume({4, 1, 1}, VoxelType::kUint16, std::make_shared<const std::vector<uint8_t>>(two)),
+                         {true, false, 0})));
 }
 
 TEST(VolumeSeedsTest, NonzeroValuesOtherThanOneCount) {

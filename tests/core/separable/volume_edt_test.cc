@@ -182,11 +182,12 @@ TEST(SeparableEdtTest, RejectsVolumesItCannotMeasure) {
   EXPECT_THROW(computeSeparableVolumeField(grid, cube(0), {}, {}, {}), std::invalid_argument);
   EXPECT_THROW(computeSeparableVolumeField(grid, cube(1), {false, true, false}, {}, {}), std::invalid_argument);
   EXPECT_THROW(computeSeparableVolumeField(grid, mask(100, 1), {}, {}, {}), std::invalid_argument);
-  EXPECT_THROW(computeSeparableVolumeField(grid, cube(3), {true, false, false}, {}, {}), std::invalid_argument);
+  EXPECT_THROW(computeSeparableVolumeField(grid, cube(3), {true, false, 0}, {}, {}), std::invalid_argument);
   FieldRunOptions closest;
   closest.closest_features = true;
-  EXPECT_THROW(computeSeparableVolumeField(grid, cube(3), {true, false, true}, closest, {}), std::invalid_argument);
-  EXPECT_NO_THROW(computeSeparableVolumeField(grid, cube(3), {true, false, true}, {}, {}));
+  EXPECT_THROW(computeSeparableVolumeField(grid, cube(3), {true, false, kAllFaces}, closest, {}),
+               std::invalid_argument);
+  EXPECT_NO_THROW(computeSeparableVolumeField(grid, cube(3), {true, false, kAllFaces}, {}, {}));
 }
 
 // ---- Anisotropic voxels, label volumes, the multi-label EDT and nearest labels ----
@@ -279,7 +280,7 @@ TEST(SeparableEdtTest, MultiLabelEdtMatchesBruteForce) {
           o.limit_world = limit;
           o.segment_length_world = limit > 3 ? 0.0 : 0.6;
           const VoxelType type = name == "noise" ? VoxelType::kUint8 : VoxelType::kUint16;
-          const Collected c = run(grid, asVolume(d, labels, type), {true, false, black}, o);
+          const Collected c = run(grid, asVolume(d, labels, type), {true, false, black ? kAllFaces : uint8_t(0)}, o);
           const std::string where = fmt::format("{} spacing {},{},{} black {} limit {}", name, spacing.x, spacing.y,
                                                 spacing.z, black, limit);
           EXPECT_EQ(c.order_error, "") << where;
@@ -303,7 +304,7 @@ TEST(SeparableEdtTest, MultiLabelEdtMatchesBruteForce) {
       }
     // Every voxel labelled: without a black border the distances are to other labels only.
     const std::vector<double> exact = oracle::otherLabelDistance(d.x, d.y, d.z, no_zero, spacingOf(grid), false);
-    const Collected c = run(grid, asVolume(d, no_zero, VoxelType::kUint32), {true, false, false}, {});
+    const Collected c = run(grid, asVolume(d, no_zero, VoxelType::kUint32), {true, false, 0}, {});
     int64_t wrong = 0;
     for (size_t i = 0; i < c.values.size(); ++i) wrong += std::abs(c.values[i] - exact[i]) > 1e-5 * (1 + exact[i]);
     EXPECT_EQ(wrong, 0) << "no background, spacing " << spacing.x << "," << spacing.y << "," << spacing.z;
@@ -363,7 +364,7 @@ TEST(SeparableEdtTest, LabelsIdenticalForAnyThreadCountAndStoppable) {
       o.limit_world = limit;
       o.segment_length_world = 1;
       o.closest_features = !multi;
-      const VolumeMeasure m{multi, false, multi};
+      const VolumeMeasure m{multi, false, multi ? kAllFaces : uint8_t(0)};
       o.threads = 1;
       const Collected one = run(grid, labels, m, o);
       o.threads = 2;
