@@ -139,7 +139,14 @@ std::string checkQueryFlags(const QueryArgs& a, QuerySetup* q) {
     return "--second-ring: the service's QueryRequest has no field for the second-ring correction (distband compute "
            "--second-ring runs it)";
   spec.request.closest_features = !a.outputs.closest.empty();
+  spec.request.nearest_label = !a.outputs.nearest_label.empty();
   if (std::string e = checkOutputFlags(a.outputs, spec.outputLimit(), &q->outputs); !e.empty()) return e;
+  // Not yet through the service (distband compute takes them).
+  if (spec.request.labels || spec.request.nearest_label ||
+      (spec.grid.spacing &&
+       !(spec.grid.spacing->x == spec.grid.spacing->y && spec.grid.spacing->y == spec.grid.spacing->z)))
+    return "--labels, --nearest-label and an anisotropic --spacing are not supported by `distband query` yet (distband "
+           "compute takes them)";
   std::error_code ec;
   if (!spec.asset && !spec.source.empty() && !std::filesystem::is_regular_file(spec.source, ec))
     return fmt::format("{} {}: no such file", spec.seeds == SeedKind::kMesh ? "--mesh" : "--volume", spec.source);
