@@ -57,8 +57,11 @@ v1::MeshFormat meshFormatFromPath(const std::string& path) {
 }
 
 Grid gridFromHeader(const v1::QueryHeader& h) {
-  return Grid({h.origin().x(), h.origin().y(), h.origin().z()}, h.voxel_size(),
-              {int32_t(h.dims().x()), int32_t(h.dims().y()), int32_t(h.dims().z())});
+  const Vec3d origin{h.origin().x(), h.origin().y(), h.origin().z()};
+  const Coord dims{int32_t(h.dims().x()), int32_t(h.dims().y()), int32_t(h.dims().z())};
+  // A server before anisotropic grids sends no spacing: voxel_size on every axis.
+  if (h.has_spacing()) return Grid(origin, {h.spacing().x(), h.spacing().y(), h.spacing().z()}, dims);
+  return Grid(origin, h.voxel_size(), dims);
 }
 
 RemoteClient::RemoteClient(const std::string& target, RemoteClientOptions options) : options_(options) {

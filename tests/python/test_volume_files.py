@@ -1,7 +1,8 @@
 """Volume files, anisotropic spacing and label volumes through the `distband` CLI, checked against scipy.
 
 Run by CTest (tests/CMakeLists.txt, label `python`) with Debian's interpreter (python3-numpy, -scipy, -nibabel), which
-sets DISTBAND_CLI_BINARY (build/client/distband) and, for `distband query`, DISTBAND_SERVER_BINARY.
+sets DISTBAND_CLI_BINARY (build/client/distband) and, for `distband query` through one server and through a
+coordinator over three replicas on loopback, DISTBAND_SERVER_BINARY (build/server/distband-server).
 References (never distband's own output): scipy.ndimage.distance_transform_edt with `sampling` for the seed field,
 its `return_indices` label lookup for nearest labels (where the nearest label is unique), and the multi-label EDT as
 edt::edt defines it, per label L the EDT of (labels == L) (the distance to the nearest voxel of another label), with
@@ -83,6 +84,40 @@ def run(*args):
 
 def rel_err(a, b):
     return float(np.max(np.abs(a.astype(np.float64) - b) / (1.0 + np.abs(b))))
+
+
+class ServerProcess:
+    """distband-server on 127.0.0.1, any free port (read from its "(port N," listening line)."""
+
+    def __init__(self, *args):
+        self.proc = subprocess.Popen([SERVER, "--listen", "127.0.0.1:0", "--threads", "2", *args],
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.lines = []
+        self.port = None
+        self._ready = threading.Event()
+        threading.Thread(target=self._read, daemon=True).start()
+        if not self._ready.wait(15):
+            self.stop()
+            raise RuntimeError("distband-server did not report its port:\n" + "".join(self.lines))
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self.lines.append(line)
+            m = re.search(r"\(port (\d+),", line)
+            if m and self.port is None:
+                self.port = int(m.group(1))
+                self._ready.set()
+
+    @property
+    def target(self):
+        return f"127.0.0.1:{self.port}"
+
+    def stop(self):
+        self.proc.terminate()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
 
 
 class VolumeFilesThroughTheCli(unittest.TestCase):
@@ -169,6 +204,74 @@ class VolumeFilesThroughTheCli(unittest.TestCase):
                                capture_output=True, text=True)
             self.assertEqual(p.returncode, 2, p.stdout + p.stderr)
             self.assertIn(expect, p.stderr.lower() if expect == "nrrd" else p.stderr)
+
+
+@unittest.skipUnless(SERVER, "DISTBAND_SERVER_BINARY not set")
+class VolumeFilesThroughAServer(unittest.TestCase):
+    """`distband query` reads the file on the client, uploads its voxels and sends spacing, origin and the label
+    flags; one server and a coordinator over three replicas (tiles of 8^3 bricks) give compute's bytes."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.TemporaryDirectory()
+        cls.dir = cls.tmp.name
+        cls.labels = label_volume((40, 36, 44), 6, seed=11)
+        write_nifti(os.path.join(cls.dir, "labels.nii.gz"), cls.labels)
+        write_nrrd(os.path.join(cls.dir, "labels.nrrd"), cls.labels)
+        cls.servers = [ServerProcess() for _ in range(4)]
+        peers = "ipv4:" + ",".join(s.target for s in cls.servers[1:])
+        cls.coordinator = ServerProcess("--peers", peers, "--tile-voxels", "8192")
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.coordinator.stop()
+        for s in cls.servers:
+            s.stop()
+        cls.tmp.cleanup()
+
+    def path(self, name):
+        return os.path.join(self.dir, name)
+
+    def same_everywhere(self, name, volume, *flags):
+        run("compute", "--volume", self.path(volume), "--out", self.path(name + "_compute.npy"), *flags)
+        expected = np.load(self.path(name + "_compute.npy"))
+        for where, server in (("one server", self.servers[0]), ("a coordinator", self.coordinator)):
+            run("query", "--server", server.target, "--progress", "quiet", "--volume", self.path(volume), "--out",
+                self.path(f"{name}_{server.port}.npy"), *flags)
+            np.testing.assert_array_equal(np.load(self.path(f"{name}_{server.port}.npy")), expected,
+                                          err_msg=f"{name} through {where}")
+        return expected
+
+    def test_anisotropic_seed_field(self):
+        field = self.same_everywhere("seed", "labels.nrrd")
+        exact = ndimage.distance_transform_edt(self.labels == 0, sampling=float32_spacing_zyx())
+        self.assertLessEqual(rel_err(field, exact), 1e-5)
+
+    def test_multi_label_edt_with_black_border_unlimited_and_limited(self):
+        exact = multi_label_edt(self.labels, float32_spacing_zyx(), True)
+        field = self.same_everywhere("ml", "labels.nii.gz", "--labels", "--black-border")
+        self.assertLessEqual(rel_err(field, exact), 1e-5)
+        limited = self.same_everywhere("ml_limit", "labels.nii.gz", "--labels", "--black-border", "--limit", "1.5")
+        inside = exact <= 1.5
+        self.assertLessEqual(rel_err(limited[inside], exact[inside]), 1e-5)
+
+    def test_multi_label_edt_without_black_border_limited(self):
+        exact = multi_label_edt(self.labels, float32_spacing_zyx(), False)
+        limited = self.same_everywhere("ml_open", "labels.nrrd", "--labels", "--limit", "3")
+        inside = exact <= 3
+        self.assertLessEqual(rel_err(limited[inside], exact[inside]), 1e-5)
+
+    def test_nearest_labels_and_the_nifti_output(self):
+        run("compute", "--volume", self.path("labels.nii.gz"), "--out", self.path("nl_field.nii.gz"),
+            "--nearest-label", self.path("nl_compute.npy"))
+        expected = np.load(self.path("nl_compute.npy"))
+        run("query", "--server", self.servers[0].target, "--progress", "quiet", "--volume",
+            self.path("labels.nii.gz"), "--out", self.path("nl_query.nii.gz"), "--nearest-label",
+            self.path("nl_query.npy"))
+        np.testing.assert_array_equal(np.load(self.path("nl_query.npy")), expected)
+        a, b = nib.load(self.path("nl_field.nii.gz")), nib.load(self.path("nl_query.nii.gz"))
+        np.testing.assert_array_equal(a.affine, b.affine)
+        np.testing.assert_array_equal(np.asarray(a.dataobj), np.asarray(b.dataobj))
 
 
 if __name__ == "__main__":
