@@ -13,12 +13,17 @@ bool isGzip(std::string_view b) { return b.size() >= 2 && uint8_t(b[0]) == 0x1f 
 Status gunzip(std::string_view in, uint64_t expected, std::string_view name, std::string* out) {
   if (expected > uint64_t(std::numeric_limits<size_t>::max() / 2))
     return Status::ResourceExhausted(fmt::format("{}: {} bytes to inflate is too large", name, expected));
-  std::string result(size_t(expected), '\0');
+  // The buffer grows as the data arrive (doubling, up to `expected`): a short stream whose header declares much never
+  // costs what it declares.
+  std::string result(
+      size_t(std::min<uint64_t>(expected, std::max<uint64_t>(uint64_t(1) << 20, uint64_t(in.size()) * 4))), '\0');
   z_stream zs{};
   if (inflateInit2(&zs, 16 + MAX_WBITS) != Z_OK) return Status::Internal("zlib: inflateInit2 failed");
   size_t consumed = 0, produced = 0;
   Status status;
   for (;;) {
+    if (produced == result.size() && result.size() < expected)
+      result.resize(size_t(std::min<uint64_t>(expected, uint64_t(result.size()) * 2)));
     // zlib counts in uInt: feed and take at most 1 GiB at a time.
     const size_t in_left = in.size() - consumed, out_left = result.size() - produced;
     zs.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(in.data() + consumed));

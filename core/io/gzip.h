@@ -2,8 +2,9 @@
 // Contract:
 //   * isGzip(bytes): the stream starts with gzip's magic (0x1f 0x8b).
 //   * gunzip(in, expected, name, out): inflates `in` — one gzip member, or several concatenated — into exactly
-//     `expected` bytes. It never allocates more than `expected` (the caller bounds it before, from a header it
-//     checked against its limits), so a gzip bomb costs at most that much: a stream that would inflate to more is
+//     `expected` bytes. Its buffer grows as the data arrive, up to `expected` (the caller bounds it before, from a
+//     header it checked against its limits; while growing the previous half is held too), so a short stream never
+//     costs what its header declares and a gzip bomb at most that much: a stream that would inflate to more is
 //     refused as soon as it does, one that ends short too; kInvalidArgument naming `name` and what was wrong (a
 //     corrupt stream, trailing bytes that are no gzip member, a size other than expected).
 //   * gunzipPrefix(in, at_most, name, out): the first min(at_most, the stream's length) inflated bytes (a header

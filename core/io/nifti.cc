@@ -19,6 +19,10 @@
 namespace distband {
 namespace {
 
+/// Header extensions (between the header and vox_offset) are skipped; more than this is refused, so a short file
+/// cannot declare gigabytes of them.
+constexpr int64_t kMaxNiftiExtensionBytes = int64_t(64) << 20;
+
 template <class T>
 void swapInPlace(T* v, size_t n = 1) {
   for (size_t i = 0; i < n; ++i) {
@@ -229,9 +233,11 @@ Status parseNifti(std::string_view bytes, std::string_view name, const VolumeRea
     return Status::InvalidArgument(
         fmt::format("{}: scaled data (scl_slope {:g}, scl_inter {:g}) are no labels", name, h.scl_slope, h.scl_inter));
   const int64_t header_bytes = h.version == 1 ? int64_t(sizeof(nifti_1_header)) : int64_t(sizeof(nifti_2_header));
-  if (h.vox_offset < header_bytes || h.vox_offset > int64_t(1) << 40)
-    return Status::InvalidArgument(
-        fmt::format("{}: vox_offset {} lies inside the header or beyond any file", name, h.vox_offset));
+  if (h.vox_offset < header_bytes)
+    return Status::InvalidArgument(fmt::format("{}: vox_offset {} lies inside the header", name, h.vox_offset));
+  if (h.vox_offset > header_bytes + kMaxNiftiExtensionBytes)
+    return Status::InvalidArgument(fmt::format("{}: vox_offset {} leaves more than {} bytes of extensions", name,
+                                               h.vox_offset, kMaxNiftiExtensionBytes));
   const uint64_t data_bytes = voxels * uint64_t(width);
   const uint64_t total = uint64_t(h.vox_offset) + data_bytes;
   if (isGzip(bytes)) {

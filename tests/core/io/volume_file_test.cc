@@ -244,6 +244,14 @@ TEST(NiftiTest, HostileFilesAreRefusedBeforeAnythingLarge) {
   offset.vox_offset = 100;
   EXPECT_TRUE(
       IsError(parseNifti(nifti(offset), "o.nii", {}, &image), kInvalid, "vox_offset 100 lies inside the header"));
+  // Found by nifti_fuzz: a 130-byte .nii.gz whose vox_offset declared gigabytes made the reader allocate them.
+  std::string far = good;
+  const float far_offset = 4294967296.f;
+  std::memcpy(far.data() + 108, &far_offset, 4);  // NIfTI-1's vox_offset
+  EXPECT_TRUE(IsError(parseNifti(gz(far), "far.nii.gz", {}, &image), kInvalid, "bytes of extensions"));
+  // A short stream whose header declares much inflates into a buffer that grows with the data, and ends short.
+  std::string small;
+  EXPECT_TRUE(IsError(gunzip(gz(std::string(1000, 'a')), uint64_t(1) << 34, "g", &small), kInvalid, "inflate to 1000"));
 }
 
 TEST(NiftiTest, TheWriterStoresFloatsAndTheAffine) {
