@@ -337,7 +337,7 @@ class ClientTest(unittest.TestCase):
         self.assertRefused(ValueError, "dims must have 3", points=pts, dims=(8, 8), voxel_size=1.0)
         self.assertRefused(ValueError, "mesh='bunny.txt': unsupported mesh format", mesh="bunny.txt", resolution=32)
         self.assertRefused(ValueError, "cannot read the file", mesh="/nonexistent/bunny.obj", resolution=32)
-        self.assertRefused(TypeError, "volume must have dtype bool or uint8", volume=np.ones((4, 4, 4)))
+        self.assertRefused(TypeError, "volume must have dtype bool, uint8, uint16 or uint32", volume=np.ones((4, 4, 4)))
         self.assertRefused(ValueError, "volume must be 3-D", volume=np.ones((4, 4), bool))
         self.assertRefused(ValueError, "resolution cannot be combined", volume=np.ones((4, 4, 4), bool),
                            resolution=8)
