@@ -469,7 +469,9 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
   CLI::App* cmd = app.add_subcommand(kRemoteCommands[1].name, kRemoteCommands[1].description);
   addConnectionFlags(cmd, &args->connection);
   cmd->add_option("--mesh", args->mesh, "Mesh file (.obj .off .ply .stl)");
-  cmd->add_option("--volume", args->volume, "Seed mask .npy (uint8/bool, shape (Z, Y, X))");
+  cmd->add_option("--volume", args->volume,
+                  "Seed or label volume: .npy (bool/uint8/16/32, shape (Z, Y, X)), NIfTI (.nii, .nii.gz) or NRRD "
+                  "(.nrrd, .nhdr); its voxels only (query --asset takes the spacing and origin)");
   return {cmd, [args, &ctx] {
             if (args->mesh.empty() == args->volume.empty()) {
               ctx.err << "distband upload: give exactly one of --mesh and --volume\n";
@@ -483,12 +485,19 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
             if (!args->mesh.empty()) {
               s = client.uploadMeshFile(args->mesh, &up);
             } else {
-              LabelVolume volume;
-              if (Status e = readNpyVolume(args->volume, &volume); !e.ok()) {
+              VolumeImage image;
+              if (Status e = readVolumeFile(args->volume, {}, &image); !e.ok()) {
                 ctx.err << "distband upload: " << e.message() << "\n";
                 return kExitUsage;
               }
-              s = client.uploadVolume(volume, args->volume, &up);
+              s = client.uploadVolume(image.volume, args->volume, &up);
+              // An asset is its voxels: the file's geometry travels with each query.
+              const VolumeGeometry& g = image.geometry;
+              if (s.ok() && g.from_header)
+                ctx.err << fmt::format(
+                    "distband upload: the header's spacing and origin are not stored with the "
+                    "asset: give query --asset {} --spacing {},{},{} --origin {},{},{}\n",
+                    up.asset_id(), g.spacing.x, g.spacing.y, g.spacing.z, g.origin.x, g.origin.y, g.origin.z);
             }
             if (!s.ok()) {
               ctx.err << "distband upload: " << describe(s) << "\n";

@@ -261,6 +261,18 @@ class VolumeFilesThroughAServer(unittest.TestCase):
         inside = exact <= 3
         self.assertLessEqual(rel_err(limited[inside], exact[inside]), 1e-5)
 
+    def test_an_uploaded_file_with_the_spacing_and_origin_upload_prints(self):
+        up = subprocess.run([CLI, "upload", "--server", self.servers[0].target, "--volume", self.path("labels.nrrd")],
+                            capture_output=True, text=True, check=True)
+        asset = up.stdout.split()[0]
+        hint = re.search(r"--asset (\S+) (--spacing \S+) (--origin \S+)", up.stderr)
+        self.assertIsNotNone(hint, up.stderr)
+        self.assertEqual(hint.group(1), asset)
+        run("compute", "--volume", self.path("labels.nrrd"), "--labels", "--out", self.path("asset_compute.npy"))
+        run("query", "--server", self.servers[0].target, "--progress", "quiet", "--asset", asset, "--labels",
+            *hint.group(2).split(), *hint.group(3).split(), "--out", self.path("asset_query.npy"))
+        np.testing.assert_array_equal(np.load(self.path("asset_query.npy")), np.load(self.path("asset_compute.npy")))
+
     def test_nearest_labels_and_the_nifti_output(self):
         run("compute", "--volume", self.path("labels.nii.gz"), "--out", self.path("nl_field.nii.gz"),
             "--nearest-label", self.path("nl_compute.npy"))
