@@ -1,6 +1,6 @@
 // Helpers shared by the benchmark programs: a steady clock and seconds since a time point, the median of timings,
 // peak RSS of this process, running a child command (tests/support/run_command.h), reading the peak RSS that
-// `/usr/bin/time -v` reports for it, and the seed volumes the benches share. Header-only; bench code only.
+// `/usr/bin/time -v` reports for it, and the seed and label volumes the benches share. Header-only; bench code only.
 #pragma once
 
 #include <sys/resource.h>
@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <cstdlib>
 #include <optional>
@@ -18,6 +20,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include "core/seeds/label_volume.h"
 #include "core/types.h"
 #include "tests/support/run_command.h"
 
@@ -90,6 +93,37 @@ inline std::vector<uint8_t> randomBlobsMask(int n) {
       }
   });
   return mask;
+}
+
+/// An n^3 label volume (x fastest) of `labels` regions: the cells of a lattice of about labels^(1/3) per axis, their
+/// faces warped by sines so boundaries run in every direction, labelled 1..labels in a shuffled order, with every
+/// tenth region (when there are ten or more) the background, 0. uint16 below 65536 labels, else uint32. Seeded.
+inline LabelVolume labelRegions(int n, int labels, uint64_t seed = 11) {
+  const int per_axis = std::max(1, int(std::ceil(std::cbrt(double(labels)) - 1e-9)));
+  const double cell = double(n) / per_axis;
+  std::vector<uint32_t> ids(size_t(per_axis) * per_axis * per_axis);
+  std::mt19937_64 rng(seed);
+  for (size_t i = 0; i < ids.size(); ++i) ids[i] = uint32_t(i % size_t(labels)) + 1;
+  std::shuffle(ids.begin(), ids.end(), rng);
+  if (labels >= 10)
+    for (uint32_t& id : ids)
+      if (id % 10 == 0) id = 0;
+  const VoxelType type = labels < 65536 ? VoxelType::kUint16 : VoxelType::kUint32;
+  const size_t w = voxelTypeBytes(type);
+  auto bytes = std::make_shared<std::vector<uint8_t>>(size_t(n) * n * n * w);
+  const double amp = 0.15 * cell, period = 0.7 * n;
+  tbb::parallel_for(0, n, [&](int z) {
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const double wx = x + amp * std::sin(6.2831853 * (y + 0.5 * z) / period);
+        const double wy = y + amp * std::sin(6.2831853 * (z + 0.3 * x) / period);
+        const double wz = z + amp * std::sin(6.2831853 * (x + 0.7 * y) / period);
+        auto index = [&](double v) { return std::clamp(int(std::floor(v / cell)), 0, per_axis - 1); };
+        const uint32_t id = ids[(size_t(index(wz)) * per_axis + index(wy)) * per_axis + index(wx)];
+        std::memcpy(bytes->data() + ((size_t(z) * n + y) * n + x) * w, &id, w);
+      }
+  });
+  return LabelVolume({n, n, n}, type, bytes);
 }
 
 }  // namespace distband::bench

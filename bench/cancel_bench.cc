@@ -170,7 +170,7 @@ int run(int argc, char** argv) {
         plan(shellRequest(band, limit), band ? FieldAlgorithm::kBand : FieldAlgorithm::kSeparable);
     return [&, planned](Interrupter& stop) {
       SeedSource source;
-      source.mask = shellMask();
+      source.volume = LabelVolume({n, n, n}, VoxelType::kUint8, shellMask());
       bench::RunSettings settings;
       settings.max_chunk_bricks = 1024;
       settings.interrupter = &stop;

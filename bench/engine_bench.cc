@@ -367,7 +367,9 @@ int runCase(const CaseSpec& spec) {
   }
   SeedSource source;
   source.points = &input.points;
-  source.mask = std::shared_ptr<const std::vector<uint8_t>>(&input.mask, [](const std::vector<uint8_t>*) {});
+  if (!input.mask.empty())  // volume cases
+    source.volume = LabelVolume({n, n, n}, VoxelType::kUint8, std::shared_ptr<const std::vector<uint8_t>>(
+                                                                   &input.mask, [](const std::vector<uint8_t>*) {}));
   bench::RunSettings settings;
   settings.threads = spec.threads;
 

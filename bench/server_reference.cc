@@ -44,7 +44,7 @@ Status ServerReference::addMeshFile(const std::string& path, std::string* asset_
 Status ServerReference::addVolume(const v1::Dims& dims, std::string bytes, const std::string& name,
                                   std::string* asset_id) {
   std::shared_ptr<const Asset> asset;
-  if (Status s = parseVolumeAsset(dims, std::move(bytes), name, "UploadVolumeChunk.header", options_.max_voxels_per_query,
+  if (Status s = parseVolumeAsset(dims, v1::VOXEL_TYPE_UINT8, std::move(bytes), name, "UploadVolumeChunk.header", options_.max_voxels_per_query,
                                   nullptr, &asset);
       !s.ok())
     return s;
@@ -75,7 +75,7 @@ Status ServerReference::run(const ResolvedQuery& q, int threads, const SegmentCa
   SeedSource source;
   source.points = &q.points;
   if (q.asset) {
-    source.mask = q.asset->mask;
+    source.volume = q.asset->volume;
     source.mesh = q.asset->mesh.get();
   }
   FieldInputs inputs;

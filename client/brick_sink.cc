@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "core/io/dense_field.h"
+#include "core/io/nifti.h"
 #include "core/io/npy.h"
 #include "core/io/vdb_writer.h"
 
@@ -23,9 +24,11 @@ class NpyBrickSink : public BrickSink {
     if (sign_from_band_) delivered_.assign(size_t(layout.grid.voxelCount()), 0);
     if (layout.signed_distance && layout.inside) {
       std::vector<float>& v = field_.values();
-      const std::vector<uint8_t>& in = *layout.inside;
-      for (size_t i = 0; i < v.size() && i < in.size(); ++i)
-        if (in[i]) v[i] = -layout.background;
+      layout.inside.visit([&](const auto* in) {
+        const size_t n = std::min(v.size(), size_t(layout.inside.voxelCount()));
+        for (size_t i = 0; i < n; ++i)
+          if (in[i]) v[i] = -layout.background;
+      });
     }
   }
   void add(const SegmentBricks& segment) override {
@@ -40,11 +43,24 @@ class NpyBrickSink : public BrickSink {
   }
   Status finish() override {
     if (sign_from_band_) fillSignsAlongRows();
+    if (nifti_) {
+      VolumeGeometry g;
+      g.spacing = field_.grid().spacing();
+      g.origin = field_.grid().origin();
+      g.affine = affine_;
+      return writeNiftiField(path_, field_.values(), field_.grid().dims(), g);
+    }
     return writeNpyFloat32(path_, field_.values(), field_.grid().dims());
   }
   std::string description() const override {
     const Coord d = field_.grid().dims();
+    if (nifti_) return fmt::format("{} (NIfTI float32, {}x{}x{})", path_, d.x, d.y, d.z);
     return fmt::format("{} (float32, shape (Z, Y, X) = ({}, {}, {}))", path_, d.z, d.y, d.x);
+  }
+  /// Writes a .nii.gz with `affine` (unset: the grid's) instead of a .npy.
+  void asNifti(const std::optional<std::array<std::array<double, 4>, 3>>& affine) {
+    nifti_ = true;
+    affine_ = affine;
   }
 
  private:
@@ -70,6 +86,8 @@ class NpyBrickSink : public BrickSink {
   DenseField field_;
   bool sign_from_band_;
   std::vector<uint8_t> delivered_;
+  bool nifti_ = false;
+  std::optional<std::array<std::array<double, 4>, 3>> affine_;
 };
 
 /// An OpenVDB level set (class level set, background = the limit, negative inside), streamed leaf by leaf.
@@ -126,12 +144,19 @@ std::string checkOutputPath(const std::string& flag, const std::string& path,
 
 std::string openBrickSink(const std::string& path, const FieldLayout& layout, std::unique_ptr<BrickSink>* out) {
   if (path.empty()) return "no output path given";
-  const bool npy = endsWith(path, ".npy"), vdb = endsWith(path, ".vdb");
-  if (!npy && !vdb) return fmt::format("{}: unsupported output format (supported: .npy, .vdb)", path);
+  const bool npy = endsWith(path, ".npy"), vdb = endsWith(path, ".vdb"), nii = endsWith(path, ".nii.gz");
+  if (!npy && !vdb && !nii) return fmt::format("{}: unsupported output format (supported: .npy, .vdb, .nii.gz)", path);
   if (std::string err = checkWritable(path); !err.empty()) return err;
   if (Status s = layout.grid.validate(); !s.ok()) return s.message();
-  if (npy) *out = std::make_unique<NpyBrickSink>(path, layout);
-  else *out = std::make_unique<VdbBrickSink>(path, layout);
+  if (nii) {
+    auto sink = std::make_unique<NpyBrickSink>(path, layout);
+    sink->asNifti(layout.affine);
+    *out = std::move(sink);
+  } else if (npy) {
+    *out = std::make_unique<NpyBrickSink>(path, layout);
+  } else {
+    *out = std::make_unique<VdbBrickSink>(path, layout);
+  }
   return {};
 }
 

@@ -1,6 +1,7 @@
 // BrickSink: turns the stream of delivered bricks (from the in-process engine or, later, the service) into an
 // output file. The writer is chosen by the output path's extension: ".npy" is a dense float32 array, ".vdb" an
-// OpenVDB level set (core/io/vdb_writer.h).
+// OpenVDB level set (core/io/vdb_writer.h), ".nii.gz" a NIfTI-1 float32 image with the layout's affine
+// (core/io/nifti.h).
 // Contract:
 //   * openBrickSink() validates the path (known extension, writable location) before any compute starts and
 //     returns "" or a message naming the path. add() may be called once per delivered segment, in order.
@@ -12,7 +13,9 @@
 // Not thread-safe: feed it from one thread.
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <optional>
 #include <initializer_list>
 #include <memory>
 #include <string>
@@ -20,6 +23,7 @@
 
 #include "core/brick.h"
 #include "core/grid.h"
+#include "core/seeds/label_volume.h"
 #include "core/status.h"
 
 namespace distband {
@@ -28,10 +32,12 @@ struct FieldLayout {
   Grid grid;
   float background = 0;                                ///< value of undelivered voxels (>= 0)
   bool signed_distance = false;
-  std::shared_ptr<const std::vector<uint8_t>> inside;  ///< signed only: dense labels, nonzero = inside (may be null)
+  LabelVolume inside;  ///< signed only: the seed volume, nonzero = inside (may be empty)
   /// Signed without labels (meshes): undelivered voxels take the sign of the nearest delivered voxel along their
   /// x row (the band encloses the surface, so a row enters and leaves the inside through delivered voxels).
   bool sign_from_band = false;
+  /// .nii.gz: the input volume's voxel-to-world affine; unset: the grid's spacing and origin.
+  std::optional<std::array<std::array<double, 4>, 3>> affine;
 };
 
 class BrickSink {

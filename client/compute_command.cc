@@ -13,7 +13,7 @@
 #include "core/band/band_engine.h"
 #include "core/field/compute_field.h"
 #include "core/field/field_plan.h"
-#include "core/io/npy.h"
+#include "core/io/volume_file.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
@@ -41,7 +41,8 @@ struct SeedInput {
   GridPadding padding{-1, false};  ///< gridForMesh's; voxels -1 on an explicit lattice
   FieldPlan plan;
   FieldInputs inputs;
-  std::shared_ptr<const std::vector<uint8_t>> mask;  ///< volumes
+  LabelVolume volume;  ///< volumes
+  VolumeGeometry geometry;                           ///< volumes: the file's header, with the flags' spacing and origin
   std::string description;                           ///< the seeds and grid, for the header line
 };
 
@@ -50,6 +51,7 @@ std::string checkComputeFlags(const ComputeArgs& a, ComputeSetup* setup) {
   if (std::string e = parseFieldFlags(a.field, &setup->spec); !e.empty()) return e;
   if (a.threads < 0) return fmt::format("--threads must be >= 0 (got {})", a.threads);
   setup->spec.request.closest_features = !a.outputs.closest.empty();
+  setup->spec.request.nearest_label = !a.outputs.nearest_label.empty();
   return checkOutputFlags(a.outputs, setup->spec.outputLimit(), &setup->outputs);
 }
 
@@ -57,7 +59,14 @@ std::string checkComputeFlags(const ComputeArgs& a, ComputeSetup* setup) {
 /// or the points as vertices) or --box.
 Status buildGrid(const FieldSpec& spec, const TriangleMesh& bounds, const Coord& volume_dims, SeedInput* in) {
   if (!spec.grid.lattice) return gridForMesh(bounds, spec.meshGridOptions(), spec.request.limit(), &in->grid, &in->padding);
-  in->grid = Grid(spec.grid.origin, spec.grid.voxel_size, spec.grid.dims.value_or(volume_dims));
+  if (spec.seeds == SeedKind::kVolume) {
+    in->geometry = overrideGeometry(in->geometry, spec.grid.spacing, spec.grid.origin_given);
+    in->grid = Grid(in->geometry.origin, in->geometry.spacing, volume_dims);
+  } else if (spec.grid.spacing) {
+    in->grid = Grid(spec.grid.origin, *spec.grid.spacing, *spec.grid.dims);
+  } else {
+    in->grid = Grid(spec.grid.origin, spec.grid.voxel_size, *spec.grid.dims);
+  }
   return in->grid.validate();
 }
 
@@ -71,7 +80,14 @@ std::string seedDescription(const FieldSpec& spec, const MeshReport& report, con
                          meshSiteModeName(in.plan.meshSeedOptions(in.grid).mode), in.plan.signName(),
                          in.plan.sign_reason);
     case SeedKind::kVolume:
-      return fmt::format("volume {} ({}, {})", spec.source, grid, in.plan.signedField() ? "signed" : "unsigned");
+      return fmt::format("volume {} ({}{}, {}{})", spec.source, grid,
+                         in.grid.cubic() ? ""
+                                         : fmt::format(", spacing {:g},{:g},{:g}", in.grid.spacing().x,
+                                                       in.grid.spacing().y, in.grid.spacing().z),
+                         in.plan.labels          ? "multi-label"
+                         : in.plan.signedField() ? "signed"
+                                                 : "unsigned",
+                         in.plan.labels && in.plan.black_border ? ", black border" : "");
     case SeedKind::kPoints: break;
   }
   return fmt::format("{} point{} in {}", spec.points.size(), spec.points.size() == 1 ? "" : "s", grid);
@@ -89,10 +105,13 @@ Status buildSeedInput(const FieldSpec& spec, const Interrupter* interrupter, See
     if (Status s = loadMesh(spec.source, &mesh, &report); !s.ok()) return s;
     source.mesh = &mesh;
   } else if (spec.seeds == SeedKind::kVolume) {
-    auto mask = std::make_shared<std::vector<uint8_t>>();
-    if (Status s = readNpyMask(spec.source, mask.get(), &volume_dims); !s.ok()) return s;
+    VolumeImage image;
+    if (Status s = readVolumeFile(spec.source, {}, &image); !s.ok()) return s;
+    in->volume = std::move(image.volume);
+    in->geometry = image.geometry;
+    volume_dims = in->volume.dims();
     if (std::string e = checkMaskDims(spec, volume_dims); !e.empty()) return Status::InvalidArgument(e);
-    source.mask = in->mask = mask;
+    source.volume = in->volume;
   } else {
     mesh.vertices = spec.points;
     request.point_layout = pointLayout(spec.points);  // the planner's cost model
@@ -219,8 +238,9 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
             << "\n";
   FieldOutputs outputs(setup.outputs);
   const std::string title = std::filesystem::path(spec.source).filename().string();
-  if (std::string e = outputs.open(describeField(in.plan, in.grid, in.padding, title, in.mask)); !e.empty())
-    return usage(ctx, e);
+  FieldDescription description = describeField(in.plan, in.grid, in.padding, title, in.volume);
+  if (in.geometry.from_header) description.affine = volumeAffine(in.geometry);
+  if (std::string e = outputs.open(description); !e.empty()) return usage(ctx, e);
   printHeader(in, a.threads, ctx);
 
   options.interrupter = &watch.interrupter();

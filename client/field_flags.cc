@@ -84,7 +84,7 @@ CLI::Option* addOptional(CLI::App* cmd, const std::string& name, std::optional<T
 std::string parseSeeds(const FieldFlags& f, FieldSpec* s) {
   const int given = int(!f.mesh.empty()) + int(!f.points.empty()) + int(!f.volume.empty()) + int(!f.asset.empty());
   if (given != 1)
-    return fmt::format("give exactly one seed source: --mesh FILE, --points \"x,y,z;...\"{} --volume MASK.npy{}",
+    return fmt::format("give exactly one seed source: --mesh FILE, --points \"x,y,z;...\"{} --volume FILE{}",
                        f.assets == AssetSeeds::kYes ? "," : " or",
                        f.assets == AssetSeeds::kYes ? " or --asset ID" : "");
   if (!f.mesh.empty()) {
@@ -129,6 +129,14 @@ std::string parseGrid(const FieldFlags& f, FieldSpec* s) {
   Vec3d origin{};
   if (!f.origin.empty())
     if (std::string e = parseVec3(f.origin, "--origin", &origin); !e.empty()) return e;
+  std::optional<Vec3d> spacing;
+  if (!f.spacing.empty()) {
+    if (f.voxel_size) return "--spacing and --voxel-size exclude each other (--voxel-size v means --spacing v,v,v)";
+    Vec3d v;
+    if (std::string e = parseVec3(f.spacing, "--spacing", &v); !e.empty()) return e;
+    if (!(v.x > 0 && v.y > 0 && v.z > 0)) return fmt::format("--spacing '{}': every spacing must be > 0", f.spacing);
+    spacing = v;
+  }
   if (!f.box.empty()) {
     Vec3d lo, hi;
     if (std::string e = parseBox(f.box, &lo, &hi); !e.empty()) return e;
@@ -142,9 +150,15 @@ std::string parseGrid(const FieldFlags& f, FieldSpec* s) {
     if (f.padding) return fmt::format("--padding does not apply to {}", lattice);
     if (g.box_min) return fmt::format("--box does not apply to {}", lattice);
     g.origin = origin;
+    if (!f.origin.empty()) g.origin_given = origin;
     g.voxel_size = f.voxel_size.value_or(kDefaultVoxelSize);
+    if (f.voxel_size) spacing = Vec3d{*f.voxel_size, *f.voxel_size, *f.voxel_size};
+    g.spacing = spacing;
     return {};
   }
+  if (spacing)
+    return "--spacing applies to --dims or a volume's grid only (around the seeds or --box give --voxel-size or "
+           "--resolution)";
   if (!f.origin.empty())
     return "--origin applies to --dims or a volume's grid only (around the seeds or --box, the box places the grid)";
   if (f.voxel_size.has_value() == f.resolution.has_value())
@@ -206,6 +220,11 @@ std::string parseField(const FieldFlags& f, FieldSpec* s) {
     // The correction costs several times the propagation on triangle sites for ~0.01 voxel: meshes opt in.
     r.second_ring = true;
   }
+  if (f.labels && s->seeds != SeedKind::kVolume)
+    return "--labels applies to volume seeds (--volume, or a volume --asset)";
+  if (f.black_border && !f.labels) return "--black-border applies with --labels (the multi-label EDT)";
+  r.labels = f.labels;
+  r.black_border = f.black_border;
   if (f.deadline) {
     if (!(std::isfinite(*f.deadline) && *f.deadline >= 0))
       return fmt::format("--deadline must be finite and >= 0 seconds (got {})", *f.deadline);
@@ -222,7 +241,8 @@ void addFieldFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
                   "Seed mesh (OBJ, OFF, PLY, STL): the distance to its triangles, signed per --sign");
   cmd->add_option("--points", f->points, "Seed points in world coordinates: \"x,y,z;x,y,z\" (unsigned distances)");
   cmd->add_option("--volume", f->volume,
-                  "Seed mask .npy (uint8/bool, shape (Z, Y, X), nonzero = seed); its shape gives the grid's dims");
+                  "Seed or label volume: .npy (bool/uint8/16/32, shape (Z, Y, X)), NIfTI (.nii, .nii.gz) or NRRD "
+                  "(.nrrd, .nhdr); nonzero = seed; its shape gives the grid's dims, its header the spacing and origin");
   if (assets == AssetSeeds::kYes)
     cmd->add_option("--asset", f->asset, "A mesh or volume the server holds (the id `distband upload` printed)");
   cmd->add_option("--dims", f->dims, "Explicit grid dims X,Y,Z (a volume's: its shape, which --dims must equal)");
@@ -231,6 +251,9 @@ void addFieldFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
       fmt::format("Voxel size in world units (with --dims or a volume: default {:g}; around the seeds or --box: "
                   "this or --resolution)",
                   kDefaultVoxelSize));
+  cmd->add_option("--spacing", f->spacing,
+                  "Voxel spacing X,Y,Z in world units with --dims or a volume (anisotropic voxels; default: the volume "
+                  "file's header, else the voxel size); overrides the file's");
   cmd->add_option("--origin", f->origin,
                   "World position of voxel (0,0,0) with --dims or a volume: x,y,z (default 0,0,0)");
   addOptional(cmd, "--resolution", &f->resolution,
@@ -254,6 +277,10 @@ void addFieldFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
   cmd->add_flag("--second-ring", f->second_ring,
                 "Meshes: also run the engine's second-ring correction (slower; query refuses it: the service's "
                 "QueryRequest has no field for it)");
+  cmd->add_flag("--labels", f->labels,
+                "Volumes: the multi-label EDT (each voxel of label L != 0 gets its distance to the nearest voxel of "
+                "another label; label 0 gets 0) instead of the distance to the nonzero voxels");
+  cmd->add_flag("--black-border", f->black_border, "With --labels: the voxels just outside the grid are label 0");
   addOptional(cmd, "--deadline", &f->deadline,
               "Give up this many seconds after the start (default: never): the complete segments are kept as on "
               "Ctrl-C, exit 1");

@@ -1,10 +1,11 @@
 // Field flags: what `distband compute` and `distband query` compute — the seeds, the grid and the field — registered
 // once for both commands, so the two take the same names with the same meaning and the same defaults.
-//   seeds  --mesh FILE | --points "x,y,z;..." | --volume MASK.npy | --asset ID (query only: an uploaded mesh/volume)
-//   grid   --dims X,Y,Z [--voxel-size H] [--origin x,y,z]                  an explicit lattice (a volume: its shape)
+//   seeds  --mesh FILE | --points "x,y,z;..." | --volume FILE.{npy,nii,nii.gz,nrrd,nhdr}
+//          | --asset ID (query only: an uploaded mesh/volume)
+//   grid   --dims X,Y,Z [--voxel-size H | --spacing X,Y,Z] [--origin x,y,z]  an explicit lattice (a volume: its shape)
 //          | (--resolution N | --voxel-size H) [--padding P] [--box x0,y0,z0,x1,y1,z1]   around the seeds or the box
 //   field  [--algorithm A] [--stencil S] [--mode M] [--sign S] [--segment L] [--limit L | --limit-voxels V]
-//          [--second-ring] [--deadline SECONDS]
+//          [--second-ring] [--deadline SECONDS] [--labels [--black-border]]
 // Contract:
 //   * addFieldFlags() registers them on a command. A flag not given stays unset and core decides what it stands for:
 //     planField (core/field/field_plan.h) the algorithm, mode, stencil and sign; gridForMesh (core/mesh/mesh_grid.h)
@@ -17,6 +18,9 @@
 //     lattice (--resolution, --padding and --box do not apply there); otherwise exactly one of --resolution and
 //     --voxel-size sizes the seeds' bounding box, or --box, grown by --padding (--origin does not apply: the box
 //     places the grid).
+//   * A volume's lattice: --spacing (or --voxel-size v, meaning v,v,v) and --origin override the file's header
+//     (NIfTI, NRRD), which overrides core's defaults (overrideGeometry, core/io/volume_file.h). --labels (volumes)
+//     asks for the multi-label EDT, --black-border (with --labels) makes the grid's outside label 0.
 //   * --second-ring applies to meshes; --deadline stops the command that many seconds after it started (the
 //     commands keep the complete segments, as on Ctrl-C, and exit 1).
 #pragma once
@@ -48,10 +52,11 @@ struct FieldFlags {
   std::string mesh, points, volume, asset;
   std::optional<int> resolution, padding;
   std::optional<double> voxel_size;
-  std::string dims, origin, box;
+  std::string dims, origin, box, spacing;
   std::string stencil, mode, sign, algorithm;
   std::optional<double> segment, limit, limit_voxels, deadline;
   bool second_ring = false;
+  bool labels = false, black_border = false;
 };
 
 /// Registers the field flags on `command`; they fill `flags` when it is parsed.
@@ -63,6 +68,9 @@ struct GridChoice {
   std::optional<Coord> dims;  ///< --dims
   Vec3d origin{};             ///< lattice: --origin (default 0,0,0)
   double voxel_size = 0;      ///< lattice: --voxel-size or kDefaultVoxelSize; else --voxel-size or 0 (unset)
+  /// Lattice: --spacing, or --voxel-size on every axis; unset: a volume file's header, else the default.
+  std::optional<Vec3d> spacing;
+  std::optional<Vec3d> origin_given;  ///< lattice: --origin when given (a volume file's header gives it otherwise)
   int resolution = 0;         ///< --resolution, 0: unset (never with a lattice)
   std::optional<int> padding;
   std::optional<Vec3d> box_min, box_max;  ///< --box

@@ -24,16 +24,24 @@ std::string replaceExtension(const std::string& path, const char* extension) {
   return std::filesystem::path(path).replace_extension(extension).string();
 }
 
+/// Voxel indices and labels (uint32) take int64 ids; triangle and point ids int32.
+bool wideClosest(const std::string& feature) { return feature == "voxel" || feature == "label"; }
+
 }  // namespace
 
 void addOutputFlags(CLI::App* cmd, OutputFlags* f) {
-  cmd->add_option("--out", f->out, "Output: FIELD.vdb (OpenVDB level set) or FIELD.npy (dense float32, shape (Z, Y, X))");
+  cmd->add_option("--out", f->out,
+                  "Output: FIELD.vdb (OpenVDB level set), FIELD.npy (dense float32, shape (Z, Y, X)) or FIELD.nii.gz "
+                  "(NIfTI float32 with the input volume's affine)");
   cmd->add_option("--npy", f->npy, "Also write a dense float32 .npy (small grids)");
   cmd->add_option("--meta", f->meta, "Also write a JSON description of the field (grid, units, limit, sign, completeness)");
   cmd->add_option("--closest", f->closest,
                   "IDS.npy, or --out's FIELD.vdb (a grid \"closest\" beside the distances): each voxel's closest "
                   "feature (mesh triangle or point index: int32; seed voxel's linear index: int64; -1 where not "
                   "delivered)");
+  cmd->add_option("--nearest-label", f->nearest_label,
+                  "Volumes: LABELS.npy (int64, shape (Z, Y, X)), or --out's FIELD.vdb: each voxel's nearest seed "
+                  "voxel's label (a Voronoi map; -1 where not delivered); excludes --closest and --labels");
   cmd->add_option("--slice-png", f->slice_png,
                   "AXIS:INDEX PNG (e.g. z:mid) - a colour-mapped slice with the zero contour and a colour bar")
       ->expected(2);
@@ -53,7 +61,7 @@ std::string checkOutputFlags(const OutputFlags& f, double limit_world, OutputPla
   p.flags = f;
   std::vector<std::pair<std::string, std::string>> files;  // (flag, path): no file may be named twice
   if (!f.out.empty()) {
-    if (std::string e = checkOutputPath("--out", f.out, {".vdb", ".npy"}); !e.empty()) return e;
+    if (std::string e = checkOutputPath("--out", f.out, {".vdb", ".npy", ".nii.gz"}); !e.empty()) return e;
     files.emplace_back("--out", f.out);
   }
   if (!f.npy.empty()) {
@@ -70,6 +78,18 @@ std::string checkOutputFlags(const OutputFlags& f, double limit_world, OutputPla
     else if (f.closest != f.out)  // a grid beside the distances, in the same file
       return fmt::format("--closest {}: a .vdb closest grid is stored in --out's .vdb: give the same path, or a .npy",
                          f.closest);
+  }
+  if (!f.nearest_label.empty()) {
+    if (!f.closest.empty()) return "--nearest-label and --closest exclude each other (one closest feature per voxel)";
+    if (std::string e = checkOutputPath("--nearest-label", f.nearest_label, {".npy", ".vdb"}); !e.empty()) return e;
+    if (!endsWith(f.nearest_label, ".vdb"))
+      files.emplace_back("--nearest-label", f.nearest_label);
+    else if (f.nearest_label != f.out)
+      return fmt::format(
+          "--nearest-label {}: a .vdb label grid is stored in --out's .vdb: give the same path, or a .npy",
+          f.nearest_label);
+    p.flags.closest = f.nearest_label;  // written as the closest features are
+    p.nearest_label = true;
   }
   const bool limit_in_voxels = std::isnan(limit_world);
   const bool finite_limit = limit_in_voxels || std::isfinite(limit_world);
@@ -108,12 +128,12 @@ std::string checkOutputFlags(const OutputFlags& f, double limit_world, OutputPla
 }
 
 FieldDescription describeField(const FieldPlan& plan, const Grid& grid, const GridPadding& padding, std::string title,
-                               std::shared_ptr<const std::vector<uint8_t>> inside) {
+                               LabelVolume inside) {
   FieldDescription d;
   d.grid = grid;
   d.limit_world = plan.limit_world;
   d.signed_distance = plan.signedField();
-  d.sign_from_band = d.signed_distance && !inside;
+  d.sign_from_band = d.signed_distance && !bool(inside);
   d.inside = std::move(inside);
   d.stencil = std::string(stencilName(plan.stencil));
   d.mode = std::string(modeName(plan.mode));
@@ -122,7 +142,7 @@ FieldDescription describeField(const FieldPlan& plan, const Grid& grid, const Gr
   d.padding_voxels = padding.voxels;
   d.band_clipped = padding.band_clipped;
   d.segment_length_world = plan.segment_length_world;
-  if (plan.closest_features) d.closest_feature = std::string(plan.closestFeatureName());
+  if (plan.hasClosestFeatures()) d.closest_feature = std::string(plan.closestFeatureName());
   d.title = std::move(title);
   return d;
 }
@@ -151,7 +171,8 @@ std::string FieldOutputs::open(const FieldDescription& field) {
                        "only the background)",
                        plan_.isosurface, field.limit_world);
   if (plan_.wants_closest() && field.closest_feature.empty())
-    return "--closest: the field carries no closest-feature ids";
+    return plan_.nearest_label ? "--nearest-label: the field carries no nearest labels"
+                               : "--closest: the field carries no closest-feature ids";
   FieldLayout layout;
   layout.grid = field.grid;
   layout.background =
@@ -159,13 +180,17 @@ std::string FieldOutputs::open(const FieldDescription& field) {
   layout.signed_distance = field.signed_distance;
   layout.inside = field.inside;
   layout.sign_from_band = field.sign_from_band;
+  layout.affine = field.affine;
+  if (endsWith(f.out, ".nii.gz"))
+    if (std::string e = openBrickSink(f.out, layout, &nifti_); !e.empty()) return e;
   const std::string npy_path = endsWith(f.out, ".npy") ? f.out : f.npy;
   if (!npy_path.empty())
     if (std::string e = openBrickSink(npy_path, layout, &npy_); !e.empty()) return e;
   if (endsWith(f.out, ".vdb") || !f.slice_png.empty() || !f.isosurface.empty())
     vdb_ = std::make_unique<VdbFieldBuilder>(field.grid, layout.background);
   if (plan_.wants_closest()) {
-    if (endsWith(f.closest, ".vdb")) vdb_->addClosestGrid(field.closest_feature == "voxel");
+    if (endsWith(f.closest, ".vdb"))
+      vdb_->addClosestGrid(wideClosest(field.closest_feature));
     else closest_.assign(size_t(field.grid.voxelCount()), -1);
   }
   return {};
@@ -182,6 +207,7 @@ void FieldOutputs::commitSegment(double upper_world) {
 
 void FieldOutputs::build(const SegmentBricks& batch) {
   if (npy_) npy_->add(batch);
+  if (nifti_) nifti_->add(batch);
   if (vdb_) vdb_->add(batch);
   if (closest_.empty()) return;
   const Grid& grid = field_.grid;
@@ -196,7 +222,7 @@ void FieldOutputs::build(const SegmentBricks& batch) {
 
 Status FieldOutputs::writeClosest() {
   const std::string& path = plan_.flags.closest;
-  if (field_.closest_feature == "voxel") return writeNpyInt64(path, closest_, field_.grid.dims());
+  if (wideClosest(field_.closest_feature)) return writeNpyInt64(path, closest_, field_.grid.dims());
   std::vector<int32_t> ids(closest_.begin(), closest_.end());  // triangle and point ids are < 2^27
   return writeNpyInt32(path, ids, field_.grid.dims());
 }
@@ -223,6 +249,10 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
   if (npy_) {
     const Status s = npy_->finish();
     report(s, "wrote " + npy_->description());
+  }
+  if (nifti_) {
+    const Status s = nifti_->finish();
+    report(s, "wrote " + nifti_->description());
   }
   if (vdb_) {
     vdb_->setRunState(run.complete, segments_);
@@ -251,8 +281,9 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
     }
   }
   if (!closest_.empty())
-    report(writeClosest(), fmt::format("wrote {} (closest {} ids, {}, -1 where not delivered)", f.closest,
-                                       field_.closest_feature, field_.closest_feature == "voxel" ? "int64" : "int32"));
+    report(writeClosest(),
+           fmt::format("wrote {} (closest {} ids, {}, -1 where not delivered)", f.closest, field_.closest_feature,
+                       wideClosest(field_.closest_feature) ? "int64" : "int32"));
   const std::string field_file = !f.out.empty() ? f.out : f.npy;
   std::string meta_path = f.meta;
   if (meta_path.empty() && !run.complete && !field_file.empty()) meta_path = replaceExtension(field_file, ".json");

@@ -11,7 +11,8 @@
 //     (complete) segments are ever written, so an interrupted run keeps every complete segment received and
 //     nothing of a half-delivered one. Peak memory: the builders plus the open segment's bricks.
 //   * finish() writes every file atomically (a temporary beside the target, renamed over it): the field (.npy or
-//     .vdb), the closest-feature ids (.npy: int32 for triangles and points, int64 for voxels; -1 where nothing
+//     .vdb or .nii.gz), the closest-feature ids (.npy: int32 for triangles and points, int64 for voxels and nearest
+//     labels; -1 where nothing
 //     was delivered; or, with --closest naming --out's .vdb, an Int32Grid/Int64Grid "closest" in that file), the
 //     metadata JSON, the slice PNG and the isosurface OBJ. It returns the first error's message ("" when every
 //     file was written; the writers' Status codes stay inside, the commands take messages); `lines` gets one
@@ -23,7 +24,9 @@
 // Not thread-safe: one caller.
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <optional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -41,10 +44,11 @@ namespace distband {
 
 /// The output flags as given on the command line.
 struct OutputFlags {
-  std::string out;                      ///< --out FIELD.npy | FIELD.vdb
+  std::string out;                      ///< --out FIELD.npy | FIELD.vdb | FIELD.nii.gz
   std::string npy;                      ///< --npy FIELD.npy (a second, dense copy; may be empty)
   std::string meta;                     ///< --meta FIELD.json
   std::string closest;                  ///< --closest IDS.npy, or --out's FIELD.vdb (a grid beside the distances)
+  std::string nearest_label;            ///< --nearest-label LABELS.npy, or --out's FIELD.vdb (volumes' seed field)
   std::vector<std::string> slice_png;   ///< --slice-png AXIS:INDEX PNG
   std::vector<std::string> isosurface;  ///< --isosurface D OBJ
 };
@@ -60,6 +64,8 @@ struct OutputPlan {
   OutputFlags flags;
   SliceSpec slice;
   double isosurface = 0;  ///< world units
+  /// --nearest-label: the closest features asked for are the seeds' labels (written where flags.closest says).
+  bool nearest_label = false;
   bool wants_closest() const { return !flags.closest.empty(); }
 };
 
@@ -72,22 +78,24 @@ struct FieldDescription {
   Grid grid;
   double limit_world = 0;  ///< +infinity: no limit
   bool signed_distance = false;
-  std::shared_ptr<const std::vector<uint8_t>> inside;  ///< see FieldLayout
+  LabelVolume inside;  ///< see FieldLayout
   bool sign_from_band = false;                         ///< see FieldLayout
   std::string stencil, mode, sign, sign_reason;
   int padding_voxels = -1;  ///< -1: explicit dims
   bool band_clipped = false;
   double segment_length_world = 0;
-  std::string closest_feature;  ///< "triangle", "point", "voxel", or "" when the bricks carry none
+  std::string closest_feature;  ///< "triangle", "point", "voxel", "label", or "" when the bricks carry none
+  /// A volume file's voxel-to-world affine (NIfTI, NRRD): a .nii.gz field is written with it; unset: the grid's.
+  std::optional<std::array<std::array<double, 4>, 3>> affine;
   std::string title;            ///< leads a slice picture's title (e.g. the input file's name)
 };
 
 /// What the files say about a field computed by `plan` on `grid`: compute's own plan, or the plan query's stream
-/// header describes. `padding`: gridForMesh's (voxels -1 for an explicit lattice). `inside`: a volume's mask where the
+/// header describes. `padding`: gridForMesh's (voxels -1 for an explicit lattice). `inside`: a volume where the
 /// command holds it (compute), whose labels then sign the field; without it a signed field takes its signs from the
 /// delivered band. `title` leads a slice's title.
 FieldDescription describeField(const FieldPlan& plan, const Grid& grid, const GridPadding& padding, std::string title,
-                               std::shared_ptr<const std::vector<uint8_t>> inside = nullptr);
+                               LabelVolume inside = {});
 
 struct RunOutcome {
   bool complete = true;  ///< false: interrupted (only the committed segments are written)
@@ -121,6 +129,7 @@ class FieldOutputs {
   int segments_ = 0;
   double complete_up_to_ = 0;
   std::unique_ptr<BrickSink> npy_;
+  std::unique_ptr<BrickSink> nifti_;  ///< --out FIELD.nii.gz
   std::unique_ptr<class VdbFieldBuilder> vdb_;
   std::vector<int64_t> closest_;  ///< dense, x fastest
 };

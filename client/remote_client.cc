@@ -57,8 +57,11 @@ v1::MeshFormat meshFormatFromPath(const std::string& path) {
 }
 
 Grid gridFromHeader(const v1::QueryHeader& h) {
-  return Grid({h.origin().x(), h.origin().y(), h.origin().z()}, h.voxel_size(),
-              {int32_t(h.dims().x()), int32_t(h.dims().y()), int32_t(h.dims().z())});
+  const Vec3d origin{h.origin().x(), h.origin().y(), h.origin().z()};
+  const Coord dims{int32_t(h.dims().x()), int32_t(h.dims().y()), int32_t(h.dims().z())};
+  // A server before anisotropic grids sends no spacing: voxel_size on every axis.
+  if (h.has_spacing()) return Grid(origin, {h.spacing().x(), h.spacing().y(), h.spacing().z()}, dims);
+  return Grid(origin, h.voxel_size(), dims);
 }
 
 RemoteClient::RemoteClient(const std::string& target, RemoteClientOptions options) : options_(options) {
@@ -129,16 +132,24 @@ grpc::Status RemoteClient::uploadMeshFile(const std::string& path, v1::UploadRep
   return uploadMesh(buf.str(), format, slash == std::string::npos ? path : path.substr(slash + 1), reply);
 }
 
-grpc::Status RemoteClient::uploadVolume(const Coord& dims, const std::vector<uint8_t>& mask, const std::string& name,
-                                        v1::UploadReply* reply) {
+grpc::Status RemoteClient::uploadVolume(const LabelVolume& volume, const std::string& name, v1::UploadReply* reply) {
+  const v1::VoxelType type = volume.type() == VoxelType::kUint16   ? v1::VOXEL_TYPE_UINT16
+                             : volume.type() == VoxelType::kUint32 ? v1::VOXEL_TYPE_UINT32
+                                                                   : v1::VOXEL_TYPE_UINT8;
+  return uploadVolumeBytes(volume.dims(), type, volume.bytes(), name, reply);
+}
+
+grpc::Status RemoteClient::uploadVolumeBytes(const Coord& dims, v1::VoxelType type, const std::vector<uint8_t>& bytes,
+                                             const std::string& name, v1::UploadReply* reply) {
   grpc::ClientContext ctx;
   authorize(&ctx);
   auto writer = stub_->UploadVolume(&ctx, reply);
-  return uploadChunks(writer.get(), ctx, reinterpret_cast<const char*>(mask.data()), mask.size(),
+  return uploadChunks(writer.get(), ctx, reinterpret_cast<const char*>(bytes.data()), bytes.size(),
                       options_.upload_chunk_bytes, [&](v1::UploadVolumeHeader* h) {
                         h->mutable_dims()->set_x(uint32_t(dims.x));
                         h->mutable_dims()->set_y(uint32_t(dims.y));
                         h->mutable_dims()->set_z(uint32_t(dims.z));
+                        h->set_element_type(type);
                         h->set_name(name.substr(0, 256));
                       });
 }

@@ -24,6 +24,7 @@
 
 #include "core/brick.h"
 #include "core/grid.h"
+#include "core/seeds/label_volume.h"
 #include "distband/v1/distband.grpc.pb.h"
 
 namespace distband {
@@ -95,9 +96,12 @@ class RemoteClient {
                           v1::UploadReply* reply);
   /// Reads `path` (format from its extension: .obj .off .ply .stl) and uploads it.
   grpc::Status uploadMeshFile(const std::string& path, v1::UploadReply* reply);
-  /// `mask` has dims.x*dims.y*dims.z bytes, x fastest.
-  grpc::Status uploadVolume(const Coord& dims, const std::vector<uint8_t>& mask, const std::string& name,
-                            v1::UploadReply* reply);
+  /// Uploads a seed or label volume with its element type.
+  grpc::Status uploadVolume(const LabelVolume& volume, const std::string& name, v1::UploadReply* reply);
+  /// The same from raw bytes, as the wire takes them (dims.x*dims.y*dims.z elements of `type`, x fastest; the
+  /// server checks the count).
+  grpc::Status uploadVolumeBytes(const Coord& dims, v1::VoxelType type, const std::vector<uint8_t>& bytes,
+                                 const std::string& name, v1::UploadReply* reply);
 
   RemoteQueryResult query(const v1::QueryRequest& request, const RemoteQueryCallbacks& callbacks,
                           const RemoteQueryOptions& options = {});

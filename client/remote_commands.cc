@@ -19,6 +19,7 @@
 #include "core/band/band_engine.h"
 #include "core/field/field_plan.h"
 #include "core/io/npy.h"
+#include "core/io/volume_file.h"
 #include "core/seeds/mesh_seeds.h"
 #include "core/stencil.h"
 
@@ -129,6 +130,7 @@ struct QuerySetup {
   OutputPlan outputs;
   ProgressMode progress = ProgressMode::kAuto;
   v1::BrickEncoding encoding = v1::BRICK_ENCODING_UNSPECIFIED;
+  VolumeGeometry geometry;  ///< a volume file's header (uploadSeeds), with --spacing and --origin over it
 };
 
 /// Step 1: every flag and output path, before any network traffic.
@@ -139,6 +141,7 @@ std::string checkQueryFlags(const QueryArgs& a, QuerySetup* q) {
     return "--second-ring: the service's QueryRequest has no field for the second-ring correction (distband compute "
            "--second-ring runs it)";
   spec.request.closest_features = !a.outputs.closest.empty();
+  spec.request.nearest_label = !a.outputs.nearest_label.empty();
   if (std::string e = checkOutputFlags(a.outputs, spec.outputLimit(), &q->outputs); !e.empty()) return e;
   std::error_code ec;
   if (!spec.asset && !spec.source.empty() && !std::filesystem::is_regular_file(spec.source, ec))
@@ -161,8 +164,11 @@ std::string checkQueryFlags(const QueryArgs& a, QuerySetup* q) {
 
 /// Step 2: uploads a mesh or volume (the request names it by its id) or names the asset. Returns "" or a usage
 /// message; *status on RPC errors.
-std::string uploadSeeds(const FieldSpec& spec, RemoteClient& client, const CliContext& ctx, v1::QueryRequest* r,
+std::string uploadSeeds(QuerySetup& q, RemoteClient& client, const CliContext& ctx, v1::QueryRequest* r,
                         grpc::Status* status) {
+  const FieldSpec& spec = q.spec;
+  // A volume's grid: the file's header (read here, on the client) under the flags; core's defaults without either.
+  q.geometry = overrideGeometry({}, spec.grid.spacing, spec.grid.origin_given);
   if (spec.seeds == SeedKind::kPoints) return {};
   if (spec.asset) {
     r->set_asset_id(spec.source);
@@ -175,11 +181,12 @@ std::string uploadSeeds(const FieldSpec& spec, RemoteClient& client, const CliCo
     ctx.out << fmt::format("uploaded {}: {} ({} triangles{})\n", spec.source, up.asset_id(), up.mesh().triangles(),
                            up.already_cached() ? ", already cached" : "");
   } else {
-    std::vector<uint8_t> mask;
-    Coord dims;
-    if (Status s = readNpyMask(spec.source, &mask, &dims); !s.ok()) return s.message();
-    if (std::string e = checkMaskDims(spec, dims); !e.empty()) return e;
-    *status = client.uploadVolume(dims, mask, spec.source, &up);
+    VolumeImage image;
+    if (Status s = readVolumeFile(spec.source, {}, &image); !s.ok()) return s.message();
+    const LabelVolume& volume = image.volume;
+    if (std::string e = checkMaskDims(spec, volume.dims()); !e.empty()) return e;
+    q.geometry = overrideGeometry(image.geometry, spec.grid.spacing, spec.grid.origin_given);
+    *status = client.uploadVolume(volume, spec.source, &up);
     if (!status->ok()) return {};
     ctx.out << fmt::format("uploaded {}: {}\n", spec.source, up.asset_id());
   }
@@ -194,7 +201,15 @@ std::string fillRequest(const QuerySetup& q, v1::QueryRequest* r) {
   for (const Vec3d& p : spec.points) setVec(r->mutable_points()->add_points(), p);
   const GridChoice& c = spec.grid;
   v1::GridSpec* g = r->mutable_grid();
-  if (c.voxel_size > 0) g->set_voxel_size(c.voxel_size);
+  // An explicit lattice's spacing: a volume's geometry (file, flags, defaults), or --spacing with --dims.
+  const std::optional<Vec3d> spacing = spec.seeds == SeedKind::kVolume && c.lattice ? q.geometry.spacing : c.spacing;
+  const bool anisotropic = spacing && !(spacing->x == spacing->y && spacing->y == spacing->z);
+  if (anisotropic)
+    setVec(g->mutable_spacing(), *spacing);
+  else if (spacing)
+    g->set_voxel_size(spacing->x);
+  else if (c.voxel_size > 0)
+    g->set_voxel_size(c.voxel_size);
   if (c.resolution > 0) g->set_resolution(uint32_t(c.resolution));
   if (c.padding) g->set_padding(uint32_t(*c.padding));
   if (c.dims) {
@@ -202,7 +217,7 @@ std::string fillRequest(const QuerySetup& q, v1::QueryRequest* r) {
     g->mutable_dims()->set_y(uint32_t(c.dims->y));
     g->mutable_dims()->set_z(uint32_t(c.dims->z));
   }
-  if (c.lattice) setVec(g->mutable_origin(), c.origin);
+  if (c.lattice) setVec(g->mutable_origin(), spec.seeds == SeedKind::kVolume ? q.geometry.origin : c.origin);
   if (c.box_min) {
     setVec(g->mutable_box()->mutable_min(), *c.box_min);
     setVec(g->mutable_box()->mutable_max(), *c.box_max);
@@ -227,6 +242,9 @@ std::string fillRequest(const QuerySetup& q, v1::QueryRequest* r) {
   r->set_limit(std::isfinite(f.limit_world) ? f.limit_world : 0);  // 0: none
   r->set_limit_voxels(f.limit_voxels);
   r->set_closest_feature(f.closest_features);
+  r->set_labels(f.labels);
+  r->set_black_border(f.black_border);
+  r->set_nearest_label(f.nearest_label);
   return {};
 }
 
@@ -250,7 +268,10 @@ std::string planOfHeader(const v1::QueryHeader& h, SeedKind seeds, FieldPlan* pl
   p.sign_reason = h.sign_reason();
   p.limit_world = h.limit();
   p.segment_length_world = h.segment_length();
-  p.closest_features = h.closest_feature() != v1::CLOSEST_FEATURE_NONE;
+  p.nearest_label = h.closest_feature() == v1::CLOSEST_FEATURE_LABEL;
+  p.closest_features = h.closest_feature() != v1::CLOSEST_FEATURE_NONE && !p.nearest_label;
+  p.labels = h.labels();
+  p.black_border = h.black_border();
   *plan = std::move(p);
   return {};
 }
@@ -262,6 +283,7 @@ class QueryReceiver {
   QueryReceiver(const QuerySetup& q, const QueryArgs& a, const CliContext& ctx)
       : outputs(q.outputs),
         spec_(q.spec),
+        geometry_(q.geometry),
         progress_mode_(q.progress),
         limit_voxels_flag_(a.field.limit_voxels),
         ctx_(ctx) {}
@@ -322,7 +344,9 @@ class QueryReceiver {
                << clippedBandWarning(padding.voxels, plan.limitVoxels(grid), spec_.grid.padding.has_value()) << "\n";
     // The input file's name leads a slice's title (none for point lists and stored assets).
     const std::string title = spec_.asset ? "" : std::filesystem::path(spec_.source).filename().string();
-    if (std::string e = outputs.open(describeField(plan, grid, padding, title)); !e.empty()) {
+    FieldDescription description = describeField(plan, grid, padding, title);
+    if (geometry_.from_header) description.affine = volumeAffine(geometry_);
+    if (std::string e = outputs.open(description); !e.empty()) {
       setup_error = limit_voxels_flag_ && e.rfind("--isosurface", 0) == 0
                         ? fmt::format("{} (--limit-voxels {:g})", e, *limit_voxels_flag_)
                         : e;
@@ -339,6 +363,7 @@ class QueryReceiver {
   }
 
   const FieldSpec& spec_;
+  VolumeGeometry geometry_;
   ProgressMode progress_mode_;
   std::optional<double> limit_voxels_flag_;
   const CliContext& ctx_;
@@ -404,7 +429,7 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
 
   v1::QueryRequest request;
   grpc::Status status;
-  if (std::string e = uploadSeeds(q.spec, *connection, ctx, &request, &status); !e.empty()) return usage(e);
+  if (std::string e = uploadSeeds(q, *connection, ctx, &request, &status); !e.empty()) return usage(e);
   if (!status.ok()) {
     ctx.err << "distband query: upload failed: " << describe(status) << "\n";
     return exitCodeOf(status);
@@ -444,7 +469,9 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
   CLI::App* cmd = app.add_subcommand(kRemoteCommands[1].name, kRemoteCommands[1].description);
   addConnectionFlags(cmd, &args->connection);
   cmd->add_option("--mesh", args->mesh, "Mesh file (.obj .off .ply .stl)");
-  cmd->add_option("--volume", args->volume, "Seed mask .npy (uint8/bool, shape (Z, Y, X))");
+  cmd->add_option("--volume", args->volume,
+                  "Seed or label volume: .npy (bool/uint8/16/32, shape (Z, Y, X)), NIfTI (.nii, .nii.gz) or NRRD "
+                  "(.nrrd, .nhdr); its voxels only (query --asset takes the spacing and origin)");
   return {cmd, [args, &ctx] {
             if (args->mesh.empty() == args->volume.empty()) {
               ctx.err << "distband upload: give exactly one of --mesh and --volume\n";
@@ -458,13 +485,19 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
             if (!args->mesh.empty()) {
               s = client.uploadMeshFile(args->mesh, &up);
             } else {
-              std::vector<uint8_t> mask;
-              Coord dims;
-              if (Status e = readNpyMask(args->volume, &mask, &dims); !e.ok()) {
+              VolumeImage image;
+              if (Status e = readVolumeFile(args->volume, {}, &image); !e.ok()) {
                 ctx.err << "distband upload: " << e.message() << "\n";
                 return kExitUsage;
               }
-              s = client.uploadVolume(dims, mask, args->volume, &up);
+              s = client.uploadVolume(image.volume, args->volume, &up);
+              // An asset is its voxels: the file's geometry travels with each query.
+              const VolumeGeometry& g = image.geometry;
+              if (s.ok() && g.from_header)
+                ctx.err << fmt::format(
+                    "distband upload: the header's spacing and origin are not stored with the "
+                    "asset: give query --asset {} --spacing {},{},{} --origin {},{},{}\n",
+                    up.asset_id(), g.spacing.x, g.spacing.y, g.spacing.z, g.origin.x, g.origin.y, g.origin.z);
             }
             if (!s.ok()) {
               ctx.err << "distband upload: " << describe(s) << "\n";

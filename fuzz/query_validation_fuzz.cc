@@ -26,7 +26,7 @@ struct Fixture {
     dims.set_x(8), dims.set_y(8), dims.set_z(8);
     std::string mask(512, '\0');
     mask[100] = 1;
-    if (distband::parseVolumeAsset(dims, mask, "vol", "volume", 1 << 20, nullptr, &volume).ok()) cache.insert(volume);
+    if (distband::parseVolumeAsset(dims, distband::v1::VOXEL_TYPE_UINT8, mask, "vol", "volume", 1 << 20, nullptr, &volume).ok()) cache.insert(volume);
   }
 };
 

@@ -60,7 +60,9 @@ float halfToFloat(uint16_t h) {
 size_t bytesPerClosest(v1::ClosestFeature closest) {
   switch (closest) {
     case v1::CLOSEST_FEATURE_TRIANGLE:
-    case v1::CLOSEST_FEATURE_POINT: return 4;
+    case v1::CLOSEST_FEATURE_POINT:
+    case v1::CLOSEST_FEATURE_LABEL:
+      return 4;
     case v1::CLOSEST_FEATURE_VOXEL: return 8;
     default: return 0;
   }
@@ -153,7 +155,7 @@ Status decodeBrick(const v1::BrickData& data, v1::BrickEncoding encoding, Brick*
         } else {
           int32_t id32;
           std::memcpy(&id32, at, 4);
-          id = id32;
+          id = closest == v1::CLOSEST_FEATURE_LABEL ? int64_t(uint32_t(id32)) : int64_t(id32);  // labels: uint32
         }
         b.closest[size_t(w * 64 + std::countr_zero(bits))] = id;
         at += bpc;

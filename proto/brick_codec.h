@@ -5,8 +5,8 @@
 //   * decodeBrick validates untrusted input (mask length, value byte count, origin alignment) and returns OK or
 //     kInvalidArgument naming the problem; on success the brick's masked values are set and the others are 0.
 //   * With a closest-feature kind (QueryHeader.closest_feature) BrickData.closest carries Brick::closest of the
-//     masked voxels in the same order, int32 (TRIANGLE, POINT) or int64 (VOXEL) little-endian; decodeBrick then
-//     requires it (byte count checked) and fills Brick::closest (-1 where the mask is clear).
+//     masked voxels in the same order, int32 (TRIANGLE, POINT), uint32 (LABEL) or int64 (VOXEL) little-endian;
+//     decodeBrick then requires it (byte count checked) and fills Brick::closest (-1 where the mask is clear).
 //   * The protocol lives in proto/ because both sides need it; core/ stays free of Protobuf.
 // Pure functions; thread-safe.
 #pragma once

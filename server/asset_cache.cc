@@ -9,7 +9,7 @@ namespace distband {
 uint64_t Asset::memoryBytes() const {
   uint64_t bytes = sizeof(Asset) + id.size() + name.size();
   if (mesh) bytes += mesh->vertices.size() * sizeof(Vec3d) + mesh->triangles.size() * sizeof(mesh->triangles[0]);
-  if (mask) bytes += mask->size();
+  if (volume) bytes += volume.bytes().size();
   if (footprint) bytes += footprint->memoryBytes();
   return bytes;
 }

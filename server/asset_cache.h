@@ -20,6 +20,7 @@
 
 #include "core/field/band_extent.h"
 #include "core/mesh/triangle_mesh.h"
+#include "core/seeds/label_volume.h"
 #include "core/types.h"
 
 namespace distband {
@@ -32,9 +33,8 @@ struct Asset {
   // kMesh
   std::shared_ptr<const TriangleMesh> mesh;
   MeshReport mesh_report;
-  // kVolume: dims.x*dims.y*dims.z bytes, x fastest, nonzero = seed
-  Coord dims{};
-  std::shared_ptr<const std::vector<uint8_t>> mask;
+  // kVolume: the seed or label volume (nonzero = seed)
+  LabelVolume volume;
   std::shared_ptr<const VolumeFootprint> footprint;  ///< seed and boundary voxels (admission estimates)
 
   uint64_t memoryBytes() const;  ///< what the asset costs the cache

@@ -30,8 +30,10 @@ std::string meshAssetId(std::string_view bytes, v1::MeshFormat format) {
   return "mesh-" + sha256Hex({meshFormatExtension(format), ":", bytes});
 }
 
-std::string volumeAssetId(const v1::Dims& d, std::string_view bytes) {
-  const std::string head = fmt::format("{},{},{}:", d.x(), d.y(), d.z());
+std::string volumeAssetId(const v1::Dims& d, VoxelType type, std::string_view bytes) {
+  // uint8 volumes keep the ids they always had.
+  const std::string head = type == VoxelType::kUint8 ? fmt::format("{},{},{}:", d.x(), d.y(), d.z())
+                                                     : fmt::format("{},{},{},{}:", d.x(), d.y(), d.z(), voxelTypeName(type));
   return "volume-" + sha256Hex({head, bytes});
 }
 
@@ -64,32 +66,57 @@ Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::
   return Status::Ok();
 }
 
-uint64_t volumeParsePeakBytes(uint64_t voxels) { return voxels + voxels / 256 + (uint64_t(1) << 16); }
+uint64_t volumeParsePeakBytes(uint64_t bytes) { return bytes + bytes / 256 + (uint64_t(1) << 16); }
 
-Status parseVolumeAsset(const v1::Dims& dims, std::string bytes, const std::string& name, std::string_view field,
-                        uint64_t max_voxels, const Interrupter* interrupter, std::shared_ptr<const Asset>* out) {
+bool voxelTypeOf(v1::VoxelType type, VoxelType* out) {
+  switch (type) {
+    case v1::VOXEL_TYPE_UNSPECIFIED:
+    case v1::VOXEL_TYPE_UINT8: *out = VoxelType::kUint8; return true;
+    case v1::VOXEL_TYPE_UINT16: *out = VoxelType::kUint16; return true;
+    case v1::VOXEL_TYPE_UINT32: *out = VoxelType::kUint32; return true;
+    default: return false;
+  }
+}
+
+v1::VoxelType v1VoxelType(VoxelType type) {
+  switch (type) {
+    case VoxelType::kUint16: return v1::VOXEL_TYPE_UINT16;
+    case VoxelType::kUint32: return v1::VOXEL_TYPE_UINT32;
+    case VoxelType::kUint8: break;
+  }
+  return v1::VOXEL_TYPE_UINT8;
+}
+
+Status parseVolumeAsset(const v1::Dims& dims, v1::VoxelType element_type, std::string bytes, const std::string& name,
+                        std::string_view field, uint64_t max_voxels, const Interrupter* interrupter,
+                        std::shared_ptr<const Asset>* out) {
+  VoxelType type;
+  if (!voxelTypeOf(element_type, &type))
+    return Status::InvalidArgument(
+        fmt::format("{}.element_type must be a VoxelType value 0..3 (got {})", field, int(element_type)));
   if (Status s = checkDims(dims, fmt::format("{}.dims", field)); !s.ok()) return s;
   const uint64_t voxels = uint64_t(dims.x()) * dims.y() * dims.z();
   if (voxels > max_voxels)
     return Status::ResourceExhausted(fmt::format("{}.dims: {}x{}x{} = {} voxels exceeds the server's voxel budget of {}",
                                                  field, dims.x(), dims.y(), dims.z(), voxels, max_voxels));
-  if (bytes.size() != voxels)
-    return Status::InvalidArgument(
-        fmt::format("{}: the mask has {} bytes but dims {}x{}x{} need exactly {} (one byte per voxel)", field,
-                    bytes.size(), dims.x(), dims.y(), dims.z(), voxels));
+  const size_t width = voxelTypeBytes(type);
+  if (bytes.size() != voxels * width)
+    return Status::InvalidArgument(fmt::format(
+        "{}: the volume has {} bytes but dims {}x{}x{} of {} need exactly {} ({} byte{} per voxel)", field,
+        bytes.size(), dims.x(), dims.y(), dims.z(), voxelTypeName(type), voxels * width, width, width > 1 ? "s" : ""));
   const Coord d{int32_t(dims.x()), int32_t(dims.y()), int32_t(dims.z())};
+  const std::string id = volumeAssetId(dims, type, bytes);
+  LabelVolume volume(d, type, std::make_shared<const std::vector<uint8_t>>(bytes.begin(), bytes.end()));
+  std::string().swap(bytes);
   auto footprint = std::make_shared<VolumeFootprint>();
-  if (Status s = analyzeVolume(d, reinterpret_cast<const uint8_t*>(bytes.data()), interrupter, footprint.get());
-      !s.ok())
-    return s;
+  if (Status s = analyzeVolume(volume, interrupter, footprint.get()); !s.ok()) return s;
   if (footprint->seed_voxels == 0)
     return Status::InvalidArgument(fmt::format("{}: the mask has no nonzero (seed) voxel", field));
   auto asset = std::make_shared<Asset>();
   asset->kind = Asset::Kind::kVolume;
-  asset->id = volumeAssetId(dims, bytes);
+  asset->id = id;
   asset->name = name;
-  asset->dims = d;
-  asset->mask = std::make_shared<const std::vector<uint8_t>>(bytes.begin(), bytes.end());
+  asset->volume = std::move(volume);
   asset->footprint = std::move(footprint);
   *out = std::move(asset);
   return Status::Ok();

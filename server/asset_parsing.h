@@ -36,16 +36,21 @@ uint64_t meshParsePeakBytes(uint64_t input_bytes);
 Status parseMeshAsset(std::string_view bytes, v1::MeshFormat format, const std::string& name, std::string_view field,
                       const MeshLimits& limits, const Interrupter* interrupter, std::shared_ptr<const Asset>* out);
 
-/// `max_voxels` bounds dims.x*dims.y*dims.z (kResourceExhausted beyond it). `bytes` is taken over.
-Status parseVolumeAsset(const v1::Dims& dims, std::string bytes, const std::string& name, std::string_view field,
-                        uint64_t max_voxels, const Interrupter* interrupter, std::shared_ptr<const Asset>* out);
+/// The element type a request names (kUint8 for UNSPECIFIED); false for an unknown value. v1VoxelType: the inverse.
+bool voxelTypeOf(v1::VoxelType type, VoxelType* out);
+v1::VoxelType v1VoxelType(VoxelType type);
 
-/// Peak bytes parseVolumeAsset allocates for a mask of `voxels` bytes, the data itself excluded (the mask copy and
-/// the brick footprint).
-uint64_t volumeParsePeakBytes(uint64_t voxels);
+/// `max_voxels` bounds dims.x*dims.y*dims.z (kResourceExhausted beyond it). `bytes` is taken over.
+Status parseVolumeAsset(const v1::Dims& dims, v1::VoxelType type, std::string bytes, const std::string& name,
+                        std::string_view field, uint64_t max_voxels, const Interrupter* interrupter,
+                        std::shared_ptr<const Asset>* out);
+
+/// Peak bytes parseVolumeAsset allocates for `bytes` of volume data, the data itself excluded (the volume's copy
+/// and the brick footprint).
+uint64_t volumeParsePeakBytes(uint64_t bytes);
 
 /// The cache id parseMeshAsset / parseVolumeAsset would give these bytes (so uploads can hit the cache first).
 std::string meshAssetId(std::string_view bytes, v1::MeshFormat format);
-std::string volumeAssetId(const v1::Dims& dims, std::string_view bytes);
+std::string volumeAssetId(const v1::Dims& dims, VoxelType type, std::string_view bytes);
 
 }  // namespace distband

@@ -375,6 +375,10 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
         const v1::UploadVolumeHeader& h = c.header();
         if (!h.has_dims()) return Status::InvalidArgument("UploadVolumeChunk.header.dims must be set");
         if (Status s = checkDims(h.dims(), "UploadVolumeChunk.header.dims"); !s.ok()) return s;
+        VoxelType type;
+        if (!voxelTypeOf(h.element_type(), &type))
+          return Status::InvalidArgument(fmt::format(
+              "UploadVolumeChunk.header.element_type must be a VoxelType value 0..3 (got {})", int(h.element_type())));
         const uint64_t voxels = uint64_t(h.dims().x()) * h.dims().y() * h.dims().z();
         const uint64_t limit = std::min(options_.max_voxels_per_query, options_.max_upload_bytes);
         if (voxels > limit)
@@ -382,7 +386,7 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
               "UploadVolumeChunk.header.dims: {}x{}x{} = {} voxels exceeds the server's limit of {} (--max-voxels, "
               "--max-upload-bytes)",
               h.dims().x(), h.dims().y(), h.dims().z(), voxels, limit));
-        *expected = voxels;
+        *expected = voxels * voxelTypeBytes(type);
         return Status::Ok();
       };
   if (status.ok())
@@ -390,14 +394,16 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
   const v1::UploadVolumeHeader& h = first.header();
   received = data.size();
   if (status.ok()) {
-    if ((asset = cache_.find(volumeAssetId(h.dims(), data)))) {
+    VoxelType type = VoxelType::kUint8;
+    voxelTypeOf(h.element_type(), &type);  // checked with the header
+    if ((asset = cache_.find(volumeAssetId(h.dims(), type, data)))) {
       cached = true;
     } else {
       double parse_seconds = -1;
       status = computeAdmitted(context, *call, volumeParsePeakBytes(data.size()),
                                fmt::format("analysing the volume ({} voxels)", data.size()), [&] {
                                  const auto p0 = Clock::now();
-                                 Status s = parseVolumeAsset(h.dims(), std::move(data), h.name(),
+                                 Status s = parseVolumeAsset(h.dims(), h.element_type(), std::move(data), h.name(),
                                                              "UploadVolumeChunk.header", options_.max_voxels_per_query,
                                                              &call->interrupter(), &asset);
                                  parse_seconds = since(p0);
@@ -412,11 +418,11 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
   }
   if (status.ok()) {
     reply->set_asset_id(asset->id);
-    reply->set_bytes(asset->mask->size());
+    reply->set_bytes(asset->volume.bytes().size());
     reply->set_already_cached(cached);
-    reply->mutable_volume_dims()->set_x(uint32_t(asset->dims.x));
-    reply->mutable_volume_dims()->set_y(uint32_t(asset->dims.y));
-    reply->mutable_volume_dims()->set_z(uint32_t(asset->dims.z));
+    reply->mutable_volume_dims()->set_x(uint32_t(asset->volume.dims().x));
+    reply->mutable_volume_dims()->set_y(uint32_t(asset->volume.dims().y));
+    reply->mutable_volume_dims()->set_z(uint32_t(asset->volume.dims().z));
   }
   const double seconds = since(t0);
   callLine("UploadVolume", rid)

@@ -51,7 +51,7 @@ void QueryJob::run() {
       SeedSource source;
       source.points = &query_.points;
       if (query_.asset) {
-        source.mask = query_.asset->mask;  // a tile's volume covers its window (checked by resolveQuery)
+        source.volume = query_.asset->volume;  // a tile's volume covers its window (checked by resolveQuery)
         source.mesh = query_.asset->mesh.get();
       }
       FieldInputs inputs;

@@ -65,7 +65,7 @@ Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, Ass
       q->seed_kind = SeedKind::kVolume;
       q->seeds_label = fmt::format("inline-volume({}x{}x{})", r.volume().dims().x(), r.volume().dims().y(),
                                    r.volume().dims().z());
-      return parseVolumeAsset(r.volume().dims(), r.volume().mask(), "inline volume", "volume",
+      return parseVolumeAsset(r.volume().dims(), r.volume().element_type(), r.volume().mask(), "inline volume", "volume",
                               options.max_voxels_per_query, nullptr, &q->asset);
     }
     case v1::QueryRequest::SEEDS_NOT_SET: break;
@@ -85,6 +85,15 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, con
     return invalid(fmt::format("grid.padding must be in [0, {}] voxels (got {})", kMaxPaddingVoxels, g.padding()));
   if (g.has_origin() && !finite(g.origin()))
     return invalid("grid.origin must have finite coordinates");
+  if (g.has_spacing()) {
+    const v1::Vec3& sp = g.spacing();
+    if (!(std::isfinite(sp.x()) && sp.x() > 0 && std::isfinite(sp.y()) && sp.y() > 0 && std::isfinite(sp.z()) &&
+          sp.z() > 0))
+      return invalid(
+          fmt::format("grid.spacing must be finite and > 0 on every axis (got {}, {}, {})", sp.x(), sp.y(), sp.z()));
+    if (g.voxel_size() != 0)
+      return invalid("grid.spacing and grid.voxel_size are mutually exclusive (voxel_size v means spacing v,v,v)");
+  }
   const bool volume = q.seed_kind == SeedKind::kVolume;
   if (volume && tile && !g.has_dims())
     return invalid("grid.dims must be set for a tile of volume seeds (the volume covers only the tile's window)");
@@ -97,22 +106,31 @@ Status resolveGrid(const v1::GridSpec& g, const ResolvedQuery& q, bool tile, con
     if (g.has_dims()) {
       if (Status s = checkDims(g.dims(), "grid.dims"); !s.ok()) return s;
       dims = {int32_t(g.dims().x()), int32_t(g.dims().y()), int32_t(g.dims().z())};
-      if (volume && !tile && !(dims == q.asset->dims))
+      if (volume && !tile && !(dims == q.asset->volume.dims()))
         return invalid(fmt::format("grid.dims ({}x{}x{}) must equal the volume's dims ({}x{}x{}) or be omitted",
-                                   dims.x, dims.y, dims.z, q.asset->dims.x, q.asset->dims.y, q.asset->dims.z));
+                                   dims.x, dims.y, dims.z, q.asset->volume.dims().x, q.asset->volume.dims().y, q.asset->volume.dims().z));
     } else {
-      dims = q.asset->dims;
+      dims = q.asset->volume.dims();
+    }
+    const Vec3d origin = g.has_origin() ? toVec(g.origin()) : Vec3d{};
+    if (g.has_spacing()) {
+      *grid = Grid(origin, toVec(g.spacing()), dims);
+      return grid->validate().withPrefix("grid.spacing");
     }
     double h = g.voxel_size();
     if (h == 0) {
-      if (!volume) return invalid("grid.voxel_size must be set (> 0) when grid.dims is given");
+      if (!volume) return invalid("grid.voxel_size or grid.spacing must be set (> 0) when grid.dims is given");
       h = kDefaultVoxelSize;
     }
-    *grid = Grid(g.has_origin() ? toVec(g.origin()) : Vec3d{}, h, dims);
+    *grid = Grid(origin, h, dims);
     return grid->validate().withPrefix("grid");
   }
 
   if (g.has_origin()) return invalid("grid.origin is only used with grid.dims (the box or the seeds give it)");
+  if (g.has_spacing())
+    return invalid(
+        "grid.spacing is only used with grid.dims or volume seeds (around a box or the seeds give "
+        "voxel_size or resolution)");
   if ((g.voxel_size() > 0) == (g.resolution() > 0))
     return invalid("grid: give exactly one of voxel_size (> 0) and resolution (> 0)");
   MeshGridOptions mo;
@@ -161,10 +179,10 @@ Status resolveTile(const v1::Tile& t, const Grid& grid, ResolvedQuery* q) {
   if (Status s = resolveBox(t.window(), grid, "tile.window", &tile.window); !s.ok()) return s;
   if (Status s = resolveBox(t.deliver(), grid, "tile.deliver", &tile.deliver); !s.ok()) return s;
   if (!tile.window.contains(tile.deliver)) return invalid("tile.deliver must lie inside tile.window");
-  if (q->seed_kind == SeedKind::kVolume && !(q->asset->dims == tile.window.dims))
+  if (q->seed_kind == SeedKind::kVolume && !(q->asset->volume.dims() == tile.window.dims))
     return invalid(fmt::format("volume: a tile's volume covers its window: dims must be {}x{}x{} (got {}x{}x{})",
-                               tile.window.dims.x, tile.window.dims.y, tile.window.dims.z, q->asset->dims.x,
-                               q->asset->dims.y, q->asset->dims.z));
+                               tile.window.dims.x, tile.window.dims.y, tile.window.dims.z, q->asset->volume.dims().x,
+                               q->asset->volume.dims().y, q->asset->volume.dims().z));
   q->tile = tile;
   return Status::Ok();
 }
@@ -220,7 +238,7 @@ void estimateMemory(ResolvedQuery* q) {
     case SeedKind::kVolume:
       counts.volume_seed_voxels = q->asset->footprint->seed_voxels;
       counts.volume_boundary_voxels = q->asset->footprint->boundary_voxels;
-      addVolume(*q->asset->footprint, q->plan.inside_negative, &extent);
+      addVolume(*q->asset->footprint, q->plan.volumeMeasure(), &extent);
       break;
     case SeedKind::kMesh: {
       const TriangleMesh& mesh = *q->asset->mesh;
@@ -336,6 +354,20 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
   fr.limit_voxels = r.limit_voxels();
   fr.segment_length_world = r.segment_length();
   fr.closest_features = r.closest_feature();
+  // Label volumes: checked here by name, then against the seeds and each other by core's planner.
+  if (q.seed_kind != SeedKind::kVolume && (r.labels() || r.black_border() || r.nearest_label()))
+    return invalid(fmt::format("{}: applies to volume seeds only", r.labels()         ? "labels"
+                                                                   : r.black_border() ? "black_border"
+                                                                                      : "nearest_label"));
+  if (r.black_border() && !r.labels()) return invalid("black_border: applies with labels (the multi-label EDT)");
+  if (r.labels() && (r.nearest_label() || r.closest_feature()))
+    return invalid(fmt::format("labels: excludes {} (the multi-label EDT has no closest features)",
+                               r.nearest_label() ? "nearest_label" : "closest_feature"));
+  if (r.nearest_label() && r.closest_feature())
+    return invalid("nearest_label: excludes closest_feature (one closest feature per voxel)");
+  fr.labels = r.labels();
+  fr.black_border = r.black_border();
+  fr.nearest_label = r.nearest_label();
 
   q.batch_bytes = r.max_batch_bytes() == 0
                       ? options.batch_bytes
@@ -348,7 +380,7 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
       !s.ok())
     return s;
   if (q.seed_kind == SeedKind::kVolume && q.plan.inside_negative &&
-      q.asset->footprint->seed_voxels == uint64_t(q.asset->dims.x) * q.asset->dims.y * q.asset->dims.z)
+      q.asset->footprint->seed_voxels == uint64_t(q.asset->volume.dims().x) * q.asset->volume.dims().y * q.asset->volume.dims().z)
     return invalid("sign: SIGN_MODE_MASK_INSIDE needs a zero voxel in the mask (every voxel is inside, so the "
                    "distance to the outside is undefined)");
   if (r.has_tile())
@@ -366,7 +398,7 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
   // largest distance a voxel can have, so a tiny segment length cannot request millions of empty segments.
   if (q.plan.segment_length_world > 0) {
     const Coord d = q.grid.dims();
-    const double diagonal = q.grid.voxelSize() * std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z);
+    const double diagonal = q.grid.diagonalWorld(d);
     const double span = std::min(q.plan.limit_world, diagonal);
     if (span / q.plan.segment_length_world > kMaxSegments)
       return invalid(fmt::format("segment_length {} would cut min(limit, grid diagonal) = {} into more than {} "
@@ -412,6 +444,7 @@ v1::Stencil stencilOf(const FieldPlan& plan) {
 }
 
 v1::ClosestFeature closestOf(const FieldPlan& plan) {
+  if (plan.nearest_label) return v1::CLOSEST_FEATURE_LABEL;
   if (!plan.closest_features) return v1::CLOSEST_FEATURE_NONE;
   switch (plan.seeds) {
     case SeedKind::kMesh: return v1::CLOSEST_FEATURE_TRIANGLE;
@@ -452,6 +485,12 @@ void fillQueryHeader(const ResolvedQuery& q, const std::string& query_id, v1::Qu
   h->set_expected_voxels(q.expected_voxels);
   h->set_algorithm(std::string(algorithmName(q.plan.algorithm)));
   h->set_band_clipped(q.padding.band_clipped);
+  h->mutable_spacing()->set_x(q.grid.spacing().x);
+  h->mutable_spacing()->set_y(q.grid.spacing().y);
+  h->mutable_spacing()->set_z(q.grid.spacing().z);
+  h->set_labels(q.plan.labels);
+  h->set_black_border(q.plan.labels && q.plan.black_border);
+  if (q.seed_kind == SeedKind::kVolume && q.asset) h->set_label_type(v1VoxelType(q.asset->volume.type()));
 }
 
 }  // namespace distband

@@ -22,15 +22,17 @@ std::string boxKey(const VoxelBox& b) {
   return fmt::format("{},{},{},{},{},{}", b.min.x, b.min.y, b.min.z, b.dims.x, b.dims.y, b.dims.z);
 }
 
-/// The window's voxels of a whole-grid mask (x fastest).
-std::string cropMask(const std::vector<uint8_t>& mask, const Coord& dims, const VoxelBox& window) {
-  std::string out(size_t(window.voxelCount()), '\0');
+/// The window's voxels of a whole-grid volume (x fastest, its element type).
+std::string cropVolume(const LabelVolume& volume, const VoxelBox& window) {
+  const Coord dims = volume.dims();
+  const size_t w = volume.elementBytes();
+  std::string out(size_t(window.voxelCount()) * w, '\0');
   size_t o = 0;
   for (int z = window.min.z; z < window.end().z; ++z)
     for (int y = window.min.y; y < window.end().y; ++y) {
-      const size_t row = (size_t(z) * dims.y + y) * dims.x + window.min.x;
-      std::copy_n(reinterpret_cast<const char*>(mask.data()) + row, window.dims.x, out.data() + o);
-      o += size_t(window.dims.x);
+      const size_t row = ((size_t(z) * dims.y + y) * dims.x + window.min.x) * w;
+      std::copy_n(reinterpret_cast<const char*>(volume.bytes().data()) + row, size_t(window.dims.x) * w, out.data() + o);
+      o += size_t(window.dims.x) * w;
     }
   return out;
 }
@@ -126,7 +128,8 @@ bool SeedShipper::addSeeds(size_t tile, v1::QueryRequest* r) const {
         return true;
       }
       *r->mutable_volume()->mutable_dims() = dimsOf(window.dims);
-      r->mutable_volume()->set_mask(cropMask(*query_.asset->mask, query_.asset->dims, window));
+      r->mutable_volume()->set_element_type(v1VoxelType(query_.asset->volume.type()));
+      r->mutable_volume()->set_mask(cropVolume(query_.asset->volume, window));
       const std::string& m = r->volume().mask();
       const bool any_seed = std::any_of(m.begin(), m.end(), [](char c) { return c != 0; });
       const bool any_free = std::any_of(m.begin(), m.end(), [](char c) { return c == 0; });
@@ -156,18 +159,20 @@ Status SeedShipper::ship(TileDispatcher& calls) {
     const bool planning = !volumes_planned_;
     if (planning) {
       for (const TilePlan& t : tiles_)
-        if (uint64_t(t.window.voxelCount()) > inline_limit) volume_ids_[boxKey(t.window)] = {t.window, ""};
+        if (uint64_t(t.window.voxelCount()) * query_.asset->volume.elementBytes() > inline_limit)
+          volume_ids_[boxKey(t.window)] = {t.window, ""};
       volumes_planned_ = true;
     }
     for (auto& [key, entry] : volume_ids_) {
-      const std::string bytes = cropMask(*query_.asset->mask, query_.asset->dims, entry.first);
+      const std::string bytes = cropVolume(query_.asset->volume, entry.first);
       const v1::Dims dims = dimsOf(entry.first.dims);
-      if (planning) entry.second = volumeAssetId(dims, bytes);
+      if (planning) entry.second = volumeAssetId(dims, query_.asset->volume.type(), bytes);
       const std::string& id = entry.second;
       Status s = uploadToReplicas(id, calls, [&](v1::DistanceField::Stub& stub, grpc::ClientContext* context) {
         v1::UploadReply reply;
         v1::UploadVolumeChunk first;
         *first.mutable_header()->mutable_dims() = dims;
+        first.mutable_header()->set_element_type(v1VoxelType(query_.asset->volume.type()));
         return streamUpload(stub.UploadVolume(context, &reply), bytes, first, reply, id);
       });
       if (!s.ok()) return s;

@@ -91,7 +91,13 @@ std::optional<v1::QueryRequest> TiledQuery::request(size_t tile) {
   g->mutable_origin()->set_x(q.grid.origin().x);
   g->mutable_origin()->set_y(q.grid.origin().y);
   g->mutable_origin()->set_z(q.grid.origin().z);
-  g->set_voxel_size(q.grid.voxelSize());
+  if (q.grid.cubic()) {
+    g->set_voxel_size(q.grid.voxelSize());
+  } else {
+    g->mutable_spacing()->set_x(q.grid.spacing().x);
+    g->mutable_spacing()->set_y(q.grid.spacing().y);
+    g->mutable_spacing()->set_z(q.grid.spacing().z);
+  }
   *g->mutable_dims() = dimsOf(q.grid.dims());
   // The whole grid's algorithm, so a tile's values are the whole grid's (a separable plan takes no stencil).
   r.set_algorithm(q.plan.algorithm == FieldAlgorithm::kSeparable ? v1::ALGORITHM_SEPARABLE : v1::ALGORITHM_BAND);
@@ -103,6 +109,10 @@ std::optional<v1::QueryRequest> TiledQuery::request(size_t tile) {
   r.set_limit(q.plan.limit_world);
   r.set_max_batch_bytes(q.batch_bytes);
   r.set_closest_feature(q.plan.closest_features);
+  // Label volumes: each tile's black border only on the faces it shares with the grid (core's buildFieldInputs).
+  r.set_labels(q.plan.labels);
+  r.set_black_border(q.plan.labels && q.plan.black_border);
+  r.set_nearest_label(q.plan.nearest_label);
   setBox(plans_[tile].window, r.mutable_tile()->mutable_window());
   setBox(plans_[tile].deliver, r.mutable_tile()->mutable_deliver());
   if (!shipper_->addSeeds(tile, &r)) return std::nullopt;

@@ -24,8 +24,8 @@ bool parseMode(std::string_view name, PropagationMode* mode) {
   return false;
 }
 
-StencilKind defaultStencil(SiteKind kind) {
-  return kind == SiteKind::kTriangle ? StencilKind::kFcc12 : StencilKind::kCubic26;
+StencilKind defaultStencil(SiteKind kind, bool cubic_grid) {
+  return kind == SiteKind::kTriangle && cubic_grid ? StencilKind::kFcc12 : StencilKind::kCubic26;
 }
 
 int defaultLifespanMargin(StencilKind stencil) {

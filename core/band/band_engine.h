@@ -48,7 +48,7 @@ bool parseMode(std::string_view name, PropagationMode* mode);  ///< "paper", "ex
 
 /// The band's options: the run's (core/field/field_run.h) and the settings only propagation has.
 struct BandOptions : FieldRunOptions {
-  /// Unset: defaultStencil(seeds.kind).
+  /// Unset: defaultStencil(seeds.kind, grid.cubic()).
   std::optional<StencilKind> stencil;
   PropagationMode mode = PropagationMode::kExact;
   /// Exact mode: run the second-ring correction at the end of each segment. Unset: on for point sites (it makes point
@@ -77,10 +77,12 @@ FieldRunResult computeBandField(const Grid& grid, const Seeds& seeds, const Band
 FieldRunResult computeBandField(const Grid& grid, Seeds&& seeds, const BandOptions& options,
                                   const SegmentCallback& on_segment);
 
-/// The stencil of BandOptions without one: fcc12 for triangle sites (meshes in exact-feature mode: about half
-/// cubic26's time at the same accuracy class, docs/benchmarks.md), cubic26 for point sites (points, volumes, and
-/// meshes in paper mode, where it is the paper's stencil).
-StencilKind defaultStencil(SiteKind kind);
+/// The stencil of BandOptions without one: fcc12 for triangle sites on a cubic grid (meshes in exact-feature mode:
+/// about half cubic26's time at the same accuracy class, docs/benchmarks.md), cubic26 for point sites (points,
+/// volumes, and meshes in paper mode, where it is the paper's stencil) and on anisotropic grids (fcc12 fills its odd
+/// half from axial neighbours, which there lie at different distances: measured up to 0.6 voxel off on a sphere with
+/// spacing 1 x 2 x 3, cubic26 within 0.03 beyond the tessellation).
+StencilKind defaultStencil(SiteKind kind, bool cubic_grid = true);
 
 /// The default lifespan margin (steps) added in paper mode; see docs/algorithm.md for how it was found.
 int defaultLifespanMargin(StencilKind stencil);

@@ -96,7 +96,10 @@ uint64_t BandExtent::voxelBound() const {
   return voxels;
 }
 
-Status analyzeVolume(const Coord& d, const uint8_t* mask, const Interrupter* interrupter, VolumeFootprint* out) {
+namespace {
+
+template <class T>
+Status analyzeLabels(const Coord& d, const T* mask, const Interrupter* interrupter, VolumeFootprint* out) {
   VolumeFootprint f;
   f.dims = d;
   f.bricks = {(d.x + kBrickSize - 1) / kBrickSize, (d.y + kBrickSize - 1) / kBrickSize,
@@ -104,7 +107,8 @@ Status analyzeVolume(const Coord& d, const uint8_t* mask, const Interrupter* int
   f.brick_flags.assign(size_t(int64_t(f.bricks.x) * f.bricks.y * f.bricks.z), 0);
   const int64_t sy = d.x, sz = int64_t(d.x) * d.y;
   // One task per layer of bricks (8 z-slices): each writes only its own layer's flags.
-  std::vector<uint64_t> seeds(size_t(f.bricks.z), 0), boundaries(size_t(f.bricks.z), 0);
+  std::vector<uint64_t> seeds(size_t(f.bricks.z), 0), boundaries(size_t(f.bricks.z), 0),
+      label_boundaries(size_t(f.bricks.z), 0);
   tbb::parallel_for(0, f.bricks.z, [&](int bz) {
     for (int z = bz * kBrickSize; z < std::min(d.z, (bz + 1) * kBrickSize); ++z) {
       if (isInterrupted(interrupter)) return;
@@ -118,23 +122,41 @@ Status analyzeVolume(const Coord& d, const uint8_t* mask, const Interrupter* int
               (x > 0 && (mask[i - 1] != 0) != in) || (x + 1 < d.x && (mask[i + 1] != 0) != in) ||
               (y > 0 && (mask[i - sy] != 0) != in) || (y + 1 < d.y && (mask[i + sy] != 0) != in) ||
               (z > 0 && (mask[i - sz] != 0) != in) || (z + 1 < d.z && (mask[i + sz] != 0) != in);
+          const T l = mask[i];
+          const bool label_boundary = (x > 0 && mask[i - 1] != l) || (x + 1 < d.x && mask[i + 1] != l) ||
+                                      (y > 0 && mask[i - sy] != l) || (y + 1 < d.y && mask[i + sy] != l) ||
+                                      (z > 0 && mask[i - sz] != l) || (z + 1 < d.z && mask[i + sz] != l);
           seeds[size_t(bz)] += in;
           boundaries[size_t(bz)] += boundary;
-          flags[x >> kBrickLog2] |=
-              uint8_t((in ? VolumeFootprint::kSeed : 0) | (boundary ? VolumeFootprint::kBoundary : 0));
+          label_boundaries[size_t(bz)] += label_boundary;
+          flags[x >> kBrickLog2] |= uint8_t((in ? VolumeFootprint::kSeed : 0) |
+                                            (boundary ? VolumeFootprint::kBoundary : 0) |
+                                            (label_boundary ? VolumeFootprint::kLabelBoundary : 0));
         }
       }
     }
   });
   if (isInterrupted(interrupter)) return interrupter->status();
-  for (int bz = 0; bz < f.bricks.z; ++bz) f.seed_voxels += seeds[size_t(bz)], f.boundary_voxels += boundaries[size_t(bz)];
+  for (int bz = 0; bz < f.bricks.z; ++bz) {
+    f.seed_voxels += seeds[size_t(bz)];
+    f.boundary_voxels += boundaries[size_t(bz)];
+    f.label_boundary_voxels += label_boundaries[size_t(bz)];
+  }
   *out = std::move(f);
   return Status::Ok();
 }
 
-void addVolume(const VolumeFootprint& v, bool signed_distance, BandExtent* extent) {
+}  // namespace
+
+Status analyzeVolume(const LabelVolume& volume, const Interrupter* interrupter, VolumeFootprint* out) {
+  return volume.visit([&](const auto* labels) { return analyzeLabels(volume.dims(), labels, interrupter, out); });
+}
+
+void addVolume(const VolumeFootprint& v, const VolumeMeasure& measure, BandExtent* extent) {
   if (extent->wholeGrid()) return;
-  const uint8_t want = signed_distance ? VolumeFootprint::kBoundary : VolumeFootprint::kSeed;
+  const uint8_t want = measure.labels            ? VolumeFootprint::kLabelBoundary
+                       : measure.inside_negative ? VolumeFootprint::kBoundary
+                                                 : VolumeFootprint::kSeed;
   size_t i = 0;
   for (int z = 0; z < v.bricks.z; ++z)
     for (int y = 0; y < v.bricks.y; ++y)

@@ -18,6 +18,8 @@
 #include <vector>
 
 #include "core/grid.h"
+#include "core/seeds/label_volume.h"
+#include "core/seeds/volume_seeds.h"
 #include "core/interrupter.h"
 #include "core/status.h"
 #include "core/types.h"
@@ -54,23 +56,26 @@ class BandExtent {
   std::vector<uint8_t> marked_;
 };
 
-/// What a uint8 seed mask (dims.x*dims.y*dims.z bytes, x fastest, nonzero = seed) holds.
+/// What a seed or label volume (core/seeds/label_volume.h; nonzero = seed) holds.
 struct VolumeFootprint {
   Coord dims{};
   uint64_t seed_voxels = 0;      ///< nonzero voxels
   uint64_t boundary_voxels = 0;  ///< voxels with a 6-neighbour on the other side (both sides counted)
+  uint64_t label_boundary_voxels = 0;  ///< voxels with a 6-neighbour of another label
   Coord bricks{};                ///< brick grid of `dims`
-  std::vector<uint8_t> brick_flags;  ///< per brick, x fastest: bit 0 = holds a seed voxel, bit 1 = a boundary voxel
+  /// Per brick, x fastest: bit 0 = holds a seed voxel, bit 1 = a boundary voxel, bit 2 = a label boundary voxel.
+  std::vector<uint8_t> brick_flags;
 
-  static constexpr uint8_t kSeed = 1, kBoundary = 2;
+  static constexpr uint8_t kSeed = 1, kBoundary = 2, kLabelBoundary = 4;
   uint64_t memoryBytes() const { return brick_flags.size() + sizeof(*this); }
 };
 
-/// Scans `mask` once (polling `interrupter`); `dims` must match mask.size().
-Status analyzeVolume(const Coord& dims, const uint8_t* mask, const Interrupter* interrupter, VolumeFootprint* out);
+/// Scans `volume` once (polling `interrupter`).
+Status analyzeVolume(const LabelVolume& volume, const Interrupter* interrupter, VolumeFootprint* out);
 
-/// Adds a volume's seeds to `extent`: the bricks holding seed voxels (unsigned) or boundary voxels (signed: voxels
-/// deeper inside or outside than the limit are never reached).
-void addVolume(const VolumeFootprint& volume, bool signed_distance, BandExtent* extent);
+/// Adds a volume's seeds to `extent`: the bricks holding seed voxels (the unsigned seed field), boundary voxels
+/// (signed: voxels deeper inside or outside than the limit are never reached) or label boundary voxels (the
+/// multi-label EDT).
+void addVolume(const VolumeFootprint& volume, const VolumeMeasure& measure, BandExtent* extent);
 
 }  // namespace distband

@@ -16,17 +16,26 @@ Status buildFieldInputs(const FieldPlan& plan, const Grid& grid, const VoxelBox*
                         const Interrupter* interrupter, FieldInputs* out) {
   const Grid run_grid = window ? grid.window(*window) : grid;
   FieldInputs in;
+  if (window) {
+    in.grid_faces = 0;
+    const int lo[3] = {window->min.x, window->min.y, window->min.z};
+    const int hi[3] = {window->end().x, window->end().y, window->end().z};
+    const int n[3] = {grid.dims().x, grid.dims().y, grid.dims().z};
+    for (int a = 0; a < 3; ++a) in.grid_faces |= uint8_t((lo[a] == 0) << (2 * a) | (hi[a] == n[a]) << (2 * a + 1));
+  }
   switch (plan.seeds) {
     case SeedKind::kPoints:
       if (!source.points) throw std::invalid_argument("buildFieldInputs: point seeds need their points");
       if (Status s = makePointSeeds(grid, *source.points, &in.seeds, window); !s.ok()) return s;
       break;
     case SeedKind::kVolume:
-      if (!source.mask) throw std::invalid_argument("buildFieldInputs: a seed volume needs its mask");
-      if (plan.algorithm == FieldAlgorithm::kSeparable) {  // the separable EDT reads the mask itself
-        if (Status s = checkSeedMask(*source.mask, plan.inside_negative); !s.ok()) return s;
-        in.mask = source.mask;
-      } else if (Status s = makeVolumeSeeds(run_grid, *source.mask, plan.inside_negative, &in.seeds, interrupter);
+      if (!source.volume) throw std::invalid_argument("buildFieldInputs: a seed volume needs its volume");
+      if (plan.algorithm == FieldAlgorithm::kSeparable) {  // the separable EDT reads the volume itself
+        VolumeMeasure measure = plan.volumeMeasure();
+        measure.black_border &= in.grid_faces;
+        if (Status s = checkVolumeMeasure(source.volume, measure); !s.ok()) return s;
+        in.volume = source.volume;
+      } else if (Status s = makeVolumeSeeds(run_grid, source.volume, plan.inside_negative, &in.seeds, interrupter);
                  !s.ok()) {
         return s;
       }
@@ -47,9 +56,12 @@ FieldRunResult computeField(const FieldPlan& plan, const Grid& grid, FieldInputs
                             const SegmentCallback& on_segment) {
   if (plan.algorithm == FieldAlgorithm::kSeparable) {
     switch (plan.seeds) {
-      case SeedKind::kVolume:
-        if (!inputs.mask) throw std::invalid_argument("computeField: a separable volume plan needs the seed volume");
-        return computeSeparableVolumeField(grid, *inputs.mask, plan.inside_negative, run, on_segment);
+      case SeedKind::kVolume: {
+        if (!inputs.volume) throw std::invalid_argument("computeField: a separable volume plan needs the volume");
+        VolumeMeasure measure = plan.volumeMeasure();
+        measure.black_border &= inputs.grid_faces;
+        return computeSeparableVolumeField(grid, inputs.volume, measure, run, on_segment);
+      }
       case SeedKind::kPoints: return computeSeparablePointField(grid, inputs.seeds, run, on_segment);
       case SeedKind::kMesh: throw std::invalid_argument("computeField: meshes have no separable plan");
     }

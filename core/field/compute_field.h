@@ -1,11 +1,11 @@
 // Compute a planned field: the one place that maps a FieldPlan to what its algorithm consumes and to its entry point,
 // for the server's query jobs, `distband compute` and the benches.
 // Contract:
-//   * buildFieldInputs() turns the request's seeds (SeedSource) into the plan's inputs: the seed volume itself for the
-//     separable volume EDT (checked by checkSeedMask), Seeds (core/seeds/) for every other plan — the band's input,
+//   * buildFieldInputs() turns the request's seeds (SeedSource) into the plan's inputs: the volume itself for the
+//     separable volume EDT (checked by checkVolumeMeasure), Seeds (core/seeds/) for every other plan — the band's input,
 //     and the separable point EDT's. With `window` (a tile: a box of `grid`) the inputs are for the grid the
 //     algorithm runs on, grid.window(*window): point sites stay in the whole grid's index space so a tile's values
-//     equal the whole grid's; a volume's mask must then cover the window. Mesh seeds poll `interrupter`. Returns OK,
+//     equal the whole grid's; a volume must then cover the window. Mesh seeds poll `interrupter`. Returns OK,
 //     kInvalidArgument naming what is wrong with the seeds (an empty mask, a signed volume without outside, ...),
 //     or kCancelled / the interrupter's status when it stopped the build.
 //   * computeField() runs the plan's algorithm on its inputs under the run contract (core/field/field_run.h); what
@@ -24,6 +24,7 @@
 #include "core/grid.h"
 #include "core/interrupter.h"
 #include "core/mesh/triangle_mesh.h"
+#include "core/seeds/label_volume.h"
 #include "core/seeds/seeds.h"
 #include "core/status.h"
 
@@ -31,15 +32,18 @@ namespace distband {
 
 /// The seeds of a request as given; the one matching plan.seeds is read.
 struct SeedSource {
-  const std::vector<Vec3d>* points = nullptr;              ///< kPoints: world coordinates
-  std::shared_ptr<const std::vector<uint8_t>> mask;        ///< kVolume: x fastest, on the grid the algorithm runs on
-  const TriangleMesh* mesh = nullptr;                      ///< kMesh: validated (core/mesh/triangle_mesh.h)
+  const std::vector<Vec3d>* points = nullptr;  ///< kPoints: world coordinates
+  LabelVolume volume;                          ///< kVolume: on the grid the algorithm runs on
+  const TriangleMesh* mesh = nullptr;          ///< kMesh: validated (core/mesh/triangle_mesh.h)
 };
 
 /// What the plan's algorithm consumes.
 struct FieldInputs {
-  Seeds seeds;                                       ///< the band's and the separable point EDT's input
-  std::shared_ptr<const std::vector<uint8_t>> mask;  ///< the separable volume EDT's input; null for every other plan
+  Seeds seeds;         ///< the band's and the separable point EDT's input
+  LabelVolume volume;  ///< the separable volume EDT's input; empty for every other plan
+  /// The faces of the run's grid that are the whole grid's (VolumeMeasure's bits): a tile's window keeps the black
+  /// border only there.
+  uint8_t grid_faces = kAllFaces;
 };
 
 Status buildFieldInputs(const FieldPlan& plan, const Grid& grid, const VoxelBox* window, const SeedSource& source,

@@ -80,13 +80,14 @@ FieldMemoryEstimate estimateFieldMemory(const FieldPlan& plan, const Grid& grid,
     }
   }
   if (separable) {  // no band state, and no seeds but a point list
-    const double sides = signed_volume ? 2 : 1;  // signed: the outside's and the inside's squared distances
+    // The outside's cells (4 bytes a voxel; 8 with the nearest seed's label), and a signed field's inside's (4).
+    const double sides = (plan.nearest_label ? 2 : 1) + (signed_volume ? 1 : 0);
     if (limited)
       // Within a limit: 4 bytes per voxel of the bricks that hold a value (inside the touched bound: the boundary's
-      // bricks grown by the limit), up to twice that in partly used slabs (core/separable/internal/limited_band.h), their run lists,
-      // and a byte per grid brick for the mask's classification.
+      // bricks grown by the limit), up to twice that in partly used slabs (core/separable/internal/limited_band.h),
+      // their run lists, and five bytes per grid brick for the volume's classification.
       engine = touched * kSeparableBandBytesPerVoxel * sides + touched_bricks * kSeparableBytesPerBandBrick +
-               double(grid_voxels) / kBrickVoxels;
+               5 * double(grid_voxels) / kBrickVoxels;
     else if (plan.seeds == SeedKind::kPoints)
       // Points: a nearest-point index per grid voxel, pass 2's squared distance and point per plane entry, segment
       // lists per brick; the sorted points.
@@ -99,7 +100,7 @@ FieldMemoryEstimate estimateFieldMemory(const FieldPlan& plan, const Grid& grid,
   const double chunk = chunk_bricks ? std::min(double(chunk_bricks), touched_bricks) : touched_bricks;
   e.engine_bytes = uint64_t(engine * kSafety) + kFixedBytes;
   e.seed_bytes = uint64_t(seeds * kSafety);
-  const double closest_bytes = plan.closest_features ? kBrickVoxels * sizeof(int64_t) : 0;
+  const double closest_bytes = plan.hasClosestFeatures() ? kBrickVoxels * sizeof(int64_t) : 0;
   e.output_bytes = uint64_t((chunk + 1) * (kOutputBytesPerBrick + closest_bytes) * kSafety);
   return e;
 }

@@ -41,7 +41,7 @@ struct FieldMemoryEstimate {
 /// `touched_voxels`: BandExtent::voxelBound() of the seeds within the limit. `chunk_bricks`: bricks handed to the
 /// segment callback at once (FieldRunOptions::max_chunk_bricks; 0 = whole segments, bounded by the touched voxels).
 /// What the plan decides matters: the algorithm (the separable EDTs hold no band state: volumes 4 bytes a grid voxel,
-/// 8 signed, or with a limit up to 8 (16) a touched voxel; points 4 bytes a grid voxel and 12 per (plane, x, y) of
+/// 4 more signed and 4 more with nearest labels, or with a limit up to twice that a touched voxel; points 4 bytes a grid voxel and 12 per (plane, x, y) of
 /// plan.point_layout), the mode (paper mode's lifespans), the seeds and their sign, closest features (4 KiB more per
 /// output brick).
 FieldMemoryEstimate estimateFieldMemory(const FieldPlan& plan, const Grid& grid, const SeedCounts& seeds,

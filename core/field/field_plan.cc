@@ -23,6 +23,7 @@ std::string_view FieldPlan::signName() const {
 }
 
 std::string_view FieldPlan::closestFeatureName() const {
+  if (nearest_label) return "label";
   switch (seeds) {
     case SeedKind::kMesh: return "triangle";
     case SeedKind::kVolume: return "voxel";
@@ -42,6 +43,15 @@ std::string algorithmDescription(FieldAlgorithm algorithm, SeedKind seeds, bool 
            "the first segment comes once those bricks are known";
   return "separable: an exact EDT over the whole grid, axis by axis; the first segment comes once the whole field is "
          "known";
+}
+
+std::string FieldPlan::algorithmDescription() const {
+  std::string text = distband::algorithmDescription(algorithm, seeds, std::isfinite(limit_world));
+  if (labels)
+    text += fmt::format("; labels: each voxel of a label measured to the nearest voxel of another label{}",
+                        black_border ? " or the grid's outside (black border)" : "");
+  if (nearest_label) text += "; with each voxel's nearest seed label";
+  return text;
 }
 
 Status requestSign(std::string_view name, FieldRequest* r) {
@@ -73,7 +83,7 @@ FieldRunOptions FieldPlan::runOptions() const {
   FieldRunOptions o;
   o.limit_world = limit_world;
   o.segment_length_world = segment_length_world;
-  o.closest_features = closest_features;
+  o.closest_features = hasClosestFeatures();
   return o;
 }
 
@@ -124,12 +134,27 @@ Status planField(const FieldRequest& r, const Grid& grid, const MeshReport* mesh
   p.mode = r.mode.value_or(PropagationMode::kExact);
   // Meshes in exact mode propagate triangle sites; paper mode and the other seeds propagate points.
   p.sites = r.seeds == SeedKind::kMesh && p.mode == PropagationMode::kExact ? SiteKind::kTriangle : SiteKind::kPoint;
-  p.stencil = r.stencil.value_or(defaultStencil(p.sites));
+  p.stencil = r.stencil.value_or(defaultStencil(p.sites, grid.cubic()));
   SignPlan sign;
   if (Status st = planSign(r, mesh_report, &sign); !st.ok()) return st;
   p.mesh_sign = sign.mesh_sign;
   p.inside_negative = sign.inside_negative;
   p.sign_reason = std::move(sign.reason);
+  if (r.seeds != SeedKind::kVolume && (r.labels || r.black_border || r.nearest_label))
+    return Status::InvalidArgument("labels, black border and nearest labels are for volume seeds");
+  if (r.black_border && !r.labels)
+    return Status::InvalidArgument("black border: it applies to the multi-label EDT (labels)");
+  if (r.labels && r.inside_negative)
+    return Status::InvalidArgument("labels: the multi-label EDT is unsigned (mask-inside is the seed field's)");
+  if (r.labels && (r.nearest_label || r.closest_features))
+    return Status::InvalidArgument(
+        "labels: the multi-label EDT has no closest features (nearest labels are the seed field's)");
+  if (r.nearest_label && r.closest_features)
+    return Status::InvalidArgument("nearest label and closest features exclude each other (one id per voxel)");
+  p.labels = r.labels;
+  p.black_border = r.black_border;
+  p.nearest_label = r.nearest_label;
+  if (r.labels) p.sign_reason = "labels are unsigned";
   p.limit_world = r.limit_voxels > 0 ? r.limit_voxels * grid.voxelSize() : r.limit_world;
   p.segment_length_world = r.segment_length_world;
   p.closest_features = r.closest_features;
@@ -143,6 +168,10 @@ Status planField(const FieldRequest& r, const Grid& grid, const MeshReport* mesh
   const bool separable_applies =
       !propagation_asked && ((r.seeds == SeedKind::kVolume && !r.closest_features) ||
                              (r.seeds == SeedKind::kPoints && std::isinf(p.limit_world)));
+  if ((r.labels || r.nearest_label) && (!separable_applies || r.algorithm == FieldAlgorithm::kBand))
+    return Status::InvalidArgument(fmt::format(
+        "{}: only the separable EDT computes it (exact mode, the default stencil, no second ring, not the band)",
+        r.labels ? "labels" : "nearest label"));
   if (r.algorithm) {
     if (*r.algorithm == FieldAlgorithm::kSeparable && !separable_applies)
       return Status::InvalidArgument(

@@ -2,8 +2,9 @@
 // request validation, `distband compute` and the benches — so a default changes in one line.
 // Contract: planField() turns a FieldRequest (any choice may be left unset) into a FieldPlan where every choice is
 // made: the algorithm (the request's when it names one; else, in exact mode with no stencil or second ring asked for,
-// the separable EDT for a seed volume without closest features and for point seeds without a limit that lie on few
-// lattice planes (separablePointsPay); the band otherwise), propagation mode (exact), site kind (triangles for meshes in exact mode, points otherwise), stencil
+// the separable EDT for a seed volume without closest features — the only one for label volumes and nearest labels —
+// and for point seeds without a limit that lie on few lattice planes (separablePointsPay); the band otherwise),
+// propagation mode (exact), site kind (triangles for meshes in exact mode, points otherwise), stencil
 // (defaultStencil of the site kind), sign (meshes: kDefaultMeshSign, auto, resolved on the mesh's edges with the
 // reason; points unsigned; volumes unsigned unless inside_negative), and the limit in world units. The grid comes
 // first (core/mesh/mesh_grid.h decides its padding from the same limit): a limit given in voxels needs its voxel
@@ -24,6 +25,7 @@
 #include "core/grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
+#include "core/seeds/volume_seeds.h"
 #include "core/separable/point_edt.h"
 #include "core/status.h"
 #include "core/stencil.h"
@@ -51,9 +53,16 @@ inline constexpr std::string_view kMaskInsideSign = "mask-inside";
 struct FieldRequest {
   SeedKind seeds = SeedKind::kPoints;
   std::optional<PropagationMode> mode;   ///< unset: kExact
-  std::optional<StencilKind> stencil;    ///< unset: defaultStencil(the plan's site kind)
+  std::optional<StencilKind> stencil;    ///< unset: defaultStencil(the plan's site kind, the grid)
   std::optional<SignMethod> mesh_sign;   ///< meshes only; unset: kDefaultMeshSign
   bool inside_negative = false;          ///< volumes only: mask voxels get -distance to the outside
+  /// Volumes only: the multi-label EDT (core/seeds/volume_seeds.h: each voxel of label L != 0 measured to the nearest
+  /// voxel of another label) instead of the seed field; unsigned, the separable EDT's.
+  bool labels = false;
+  bool black_border = false;   ///< with labels: the grid's outside is label 0
+  /// Volumes, the seed field: each delivered voxel's closest feature is the label of its nearest seed (the separable
+  /// EDT's); exclusive with closest_features.
+  bool nearest_label = false;
   /// The limit: in voxels of the grid when limit_voxels > 0, else in world units (+infinity: none).
   double limit_world = std::numeric_limits<double>::infinity();
   double limit_voxels = 0;
@@ -77,6 +86,8 @@ struct FieldPlan {
   StencilKind stencil = StencilKind::kCubic26;
   SignMethod mesh_sign = SignMethod::kUnsigned;  ///< meshes: the method in force (never kAuto)
   bool inside_negative = false;                  ///< volumes
+  bool labels = false, black_border = false;     ///< volumes: FieldRequest's
+  bool nearest_label = false;                    ///< volumes: FieldRequest's
   std::string sign_reason;                       ///< why the sign is what it is ("auto: the mesh is closed", ...)
   double limit_world = std::numeric_limits<double>::infinity();
   double segment_length_world = 0;
@@ -89,17 +100,20 @@ struct FieldPlan {
   }
   /// "pseudonormal", "winding", "parity", "mask-inside" or "unsigned".
   std::string_view signName() const;
-  /// What a voxel's closest-feature id names for these seeds: "triangle", "point" or "voxel" (Seeds::FeatureKind).
+  /// What a voxel's closest-feature id names for these seeds: "triangle", "point" or "voxel" (Seeds::FeatureKind),
+  /// or "label" (nearest_label).
   std::string_view closestFeatureName() const;
+  /// Whether delivered voxels carry a closest feature (closest_features or nearest_label).
+  bool hasClosestFeatures() const { return closest_features || nearest_label; }
+  /// What a volume run measures.
+  VolumeMeasure volumeMeasure() const { return {labels, inside_negative, black_border ? kAllFaces : uint8_t(0)}; }
   double limitVoxels(const Grid& grid) const { return limit_world / grid.voxelSize(); }
   /// The run's options this plan fixes (limit, segments, closest features); threads, interrupter and chunking
   /// belong to the caller's run and are left at their defaults.
   FieldRunOptions runOptions() const;
   /// The band engine's options for a run of this plan: `run` plus the plan's mode, stencil and second ring.
   BandOptions bandOptions(const FieldRunOptions& run) const;
-  std::string algorithmDescription() const {
-    return distband::algorithmDescription(algorithm, seeds, limit_world < std::numeric_limits<double>::infinity());
-  }
+  std::string algorithmDescription() const;
   /// Mesh seeds on `grid` (the grid the engine runs on: for a tile, its window).
   MeshSeedOptions meshSeedOptions(const Grid& grid) const;
 };

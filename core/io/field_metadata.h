@@ -1,5 +1,6 @@
 // Field metadata: the JSON sidecar that tells a reader of a dense field file how to interpret it.
-// Contract: describes one computed field — grid (dims, origin, voxel size), the array layout, units and sign
+// Contract: describes one computed field — grid (dims, origin, voxel size, and the spacing along each axis: on an
+// anisotropic grid the voxel size is the smallest of them, the unit of the limit in voxels), the array layout, units and sign
 // convention, the distance limit and the background value stored beyond it, and how it was computed. Pure
 // formatting; writeFieldMetadata() writes atomically (a temporary beside the target, renamed over it) and returns
 // OK, or kIoError with a message naming the file when the OS cannot create, write or rename it. Thread-safe.

@@ -122,13 +122,13 @@ Status extractIsosurface(const VdbTree<float>& field, const Grid& grid, const Is
   id_of.reserve(first[n]);
   mesh->vertices.resize(first[n]);
   const Vec3d origin = grid.origin();
-  const double h = grid.voxelSize();
+  const Vec3d h = grid.spacing();
   for (size_t li = 0; li < n; ++li)
     for (size_t k = 0; k < cells[li].size(); ++k) {
       const CellVertex& cv = cells[li][k];
       const uint32_t id = uint32_t(first[li] + k);
       id_of.emplace(cv.cell, id);
-      mesh->vertices[id] = {float(origin.x + h * cv.x), float(origin.y + h * cv.y), float(origin.z + h * cv.z)};
+      mesh->vertices[id] = {float(origin.x + h.x * cv.x), float(origin.y + h.y * cv.y), float(origin.z + h.z * cv.z)};
     }
 
   // 3. A quad for every crossing lattice edge, seen from the cell at its start: the 4 cells around the edge, counter-

@@ -1,5 +1,6 @@
 #include "core/io/npy.h"
 
+#include <algorithm>
 #include <bit>
 #include <cctype>
 #include <cerrno>
@@ -291,19 +292,30 @@ Status readNpy(const std::string& path, NpyArray* out) {
   return Status::Ok();
 }
 
-Status readNpyMask(const std::string& path, std::vector<uint8_t>* mask, Coord* dims) {
+Status npyVolume(NpyArray a, std::string_view name, LabelVolume* out) {
+  const std::string_view d = a.descr;
+  const char order = d.empty() ? '?' : d[0];
+  const std::string_view kind = d.size() == 3 && std::strchr("|<>=", order) ? d.substr(1) : std::string_view();
+  VoxelType type;
+  if (kind == "u1" || kind == "b1") type = VoxelType::kUint8;
+  else if (kind == "u2" && order != '|') type = VoxelType::kUint16;
+  else if (kind == "u4" && order != '|') type = VoxelType::kUint32;
+  else
+    return Status::InvalidArgument(fmt::format(
+        "{}: a seed or label volume must have dtype bool, uint8, uint16 or uint32, got '{}'", name, a.descr));
+  Coord dims;
+  if (Status s = volumeDims(a, name, &dims); !s.ok()) return s;
+  if (order == '>') {  // big-endian elements: to the host's (little-endian) order
+    const size_t w = voxelTypeBytes(type);
+    for (size_t i = 0; i + w <= a.data.size(); i += w) std::reverse(a.data.begin() + int64_t(i), a.data.begin() + int64_t(i + w));
+  }
+  return LabelVolume::make(dims, type, std::make_shared<const std::vector<uint8_t>>(std::move(a.data)), out);
+}
+
+Status readNpyVolume(const std::string& path, LabelVolume* out) {
   NpyArray a;
   if (Status s = readNpy(path, &a); !s.ok()) return s;
-  const std::string_view d = a.descr;
-  const bool one_byte = d.size() == 3 && std::strchr("|<>=", d[0]) != nullptr;
-  if (!one_byte || (d.substr(1) != "u1" && d.substr(1) != "b1"))
-    return Status::InvalidArgument(
-        fmt::format("{}: a seed mask must have dtype uint8 or bool, got '{}'", path, a.descr));
-  Coord c;
-  if (Status s = volumeDims(a, path, &c); !s.ok()) return s;
-  *mask = std::move(a.data);
-  *dims = c;
-  return Status::Ok();
+  return npyVolume(std::move(a), path, out);
 }
 
 Status readNpyFloat32(const std::string& path, std::vector<float>* values, Coord* dims) {
@@ -359,6 +371,11 @@ Status writeNpyMask(const std::string& path, const std::vector<uint8_t>& mask, c
     return Status::InvalidArgument(
         fmt::format("{}: {} bytes do not fill dims {}x{}x{}", path, mask.size(), dims.x, dims.y, dims.z));
   return writeNpyFile(path, "|u1", dims, mask.data(), mask.size());
+}
+
+Status writeNpyVolume(const std::string& path, const LabelVolume& volume) {
+  static constexpr const char* kDescr[] = {"|u1", "<u2", "<u4"};
+  return writeNpyFile(path, kDescr[int(volume.type())], volume.dims(), volume.bytes().data(), volume.bytes().size());
 }
 
 namespace {

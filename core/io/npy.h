@@ -11,8 +11,8 @@
 //     that do not fill `dims` when writing; kResourceExhausted for a header whose shape exceeds the reader's hard
 //     limits (an extent above 2^40, or more than 2^46 payload bytes); kNotFound when the file to read does not
 //     exist; kIoError when the OS cannot open, read, write or rename a file.
-//   * Accepted element types: masks are uint8 ('|u1') or bool ('|b1'); nonzero means "seed". float32 ('<f4')
-//     can be read for tests and round trips. Writing produces version 1.0 (2.0 for huge headers) files with the
+//   * Accepted element types: seed and label volumes are bool ('|b1'), uint8 ('|u1'), uint16 or uint32 (either byte
+//     order); nonzero means "seed", the value is the label. float32 ('<f4') can be read for tests and round trips. Writing produces version 1.0 (2.0 for huge headers) files with the
 //     header padded to a multiple of 64 bytes, as numpy.save does.
 //   * Thread-safe (no shared state).
 #pragma once
@@ -22,6 +22,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/seeds/label_volume.h"
 #include "core/status.h"
 #include "core/types.h"
 
@@ -41,8 +42,12 @@ Status parseNpy(std::string_view bytes, std::string_view name, NpyArray* out);
 /// Reads and parses a .npy file.
 Status readNpy(const std::string& path, NpyArray* out);
 
-/// Reads a 3-D uint8 or bool mask of shape (Z, Y, X); dims = {X, Y, Z}; mask bytes are x-fastest.
-Status readNpyMask(const std::string& path, std::vector<uint8_t>* mask, Coord* dims);
+/// A parsed 3-D array of shape (Z, Y, X) as a seed or label volume: dtype bool or uint8 ('|b1', '|u1'), uint16 or
+/// uint32 (either byte order, converted to the host's); dims = {X, Y, Z}. kInvalidArgument naming `name` otherwise.
+Status npyVolume(NpyArray array, std::string_view name, LabelVolume* out);
+
+/// readNpy, then npyVolume.
+Status readNpyVolume(const std::string& path, LabelVolume* out);
 
 /// Reads a 3-D little-endian float32 array of shape (Z, Y, X); dims = {X, Y, Z}.
 Status readNpyFloat32(const std::string& path, std::vector<float>* values, Coord* dims);
@@ -56,6 +61,9 @@ Status writeNpyFloat32(const std::string& path, const std::vector<float>& values
 
 /// Writes a uint8 mask (x-fastest) as a (Z, Y, X) '|u1' array.
 Status writeNpyMask(const std::string& path, const std::vector<uint8_t>& mask, const Coord& dims);
+
+/// Writes a volume as a (Z, Y, X) array of its element type ('|u1', '<u2', '<u4').
+Status writeNpyVolume(const std::string& path, const LabelVolume& volume);
 
 /// Integer arrays of shape (Z, Y, X) (closest-feature ids), '<i4' or '<i8'; atomic like the others.
 Status writeNpyInt32(const std::string& path, const std::vector<int32_t>& values, const Coord& dims);

@@ -299,7 +299,8 @@ Status writeSlicePng(const std::string& path, const Grid& grid, const VoxelSampl
   int64_t contour_voxels = 0;
   if (options.draw_contour) {
     const double max_jump =
-        options.contour_max_jump_world > 0 ? options.contour_max_jump_world : 2.0 * grid.voxelSize();
+        options.contour_max_jump_world > 0 ? options.contour_max_jump_world
+                                           : 2.0 * grid.voxelSize() * grid.maxAxisScale();
     auto consider = [&](size_t a, size_t b) {
       const float va = values[a], vb = values[b];
       if (!std::isfinite(va) || !std::isfinite(vb)) return;

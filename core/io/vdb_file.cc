@@ -245,11 +245,15 @@ void writeGrid(FileOut& file, const VdbGridOut& g, const VdbTree<T>& tree, const
   meta["file_compression"] = std::string("blosc + active values");
   put(out, uint32_t(meta.size()));
   for (const auto& [name, value] : meta) putMeta(out, name, value);
-  // UniformScaleTranslateMap: translation, scale, voxel size, 1 / scale, 1 / scale², 1 / (2 scale).
-  putString(out, "UniformScaleTranslateMap");
-  const double s = xform.voxel_size, inv = 1.0 / s;
-  for (double v : {xform.translation.x, xform.translation.y, xform.translation.z, s, s, s, std::abs(s), std::abs(s),
-                   std::abs(s), inv, inv, inv, inv * inv, inv * inv, inv * inv, 0.5 * inv, 0.5 * inv, 0.5 * inv})
+  // (Uniform)ScaleTranslateMap, both stored alike: translation, scale, voxel size, 1 / scale, 1 / scale²,
+  // 1 / (2 scale), each a vector over the axes.
+  const Vec3d s = xform.spacing;
+  const bool uniform = s.x == s.y && s.y == s.z;
+  putString(out, uniform ? "UniformScaleTranslateMap" : "ScaleTranslateMap");
+  const Vec3d inv{1.0 / s.x, 1.0 / s.y, 1.0 / s.z};
+  for (double v : {xform.translation.x, xform.translation.y, xform.translation.z, s.x, s.y, s.z, std::abs(s.x),
+                   std::abs(s.y), std::abs(s.z), inv.x, inv.y, inv.z, inv.x * inv.x, inv.y * inv.y, inv.z * inv.z,
+                   0.5 * inv.x, 0.5 * inv.y, 0.5 * inv.z})
     put(out, v);
 
   // Topology: one buffer; the root's background, tiles and children; depth first through the nodes.

@@ -1,8 +1,9 @@
 // writeVdbFile: writes sealed VdbTrees (core/io/vdb_tree.h) as an OpenVDB file (format 224, as OpenVDB 10 writes it),
 // without linking OpenVDB. Any OpenVDB 6+ reads it (tests read every file back with OpenVDB's own reader).
 // Contract:
-//   * One grid per VdbGridOut, in order: its tree's topology and leaf buffers, the transform (a uniform scale by
-//     voxel_size plus a translation: OpenVDB's UniformScaleTranslateMap), and its metadata — `metadata`, plus "class"
+//   * One grid per VdbGridOut, in order: its tree's topology and leaf buffers, the transform (a scale by the spacing
+//     plus a translation: OpenVDB's UniformScaleTranslateMap when the spacing is the same on every axis, else its
+//     ScaleTranslateMap, so OpenVDB reads back each axis's voxel size), and its metadata — `metadata`, plus "class"
 //     ("level set" when level_set), "name", and the statistics OpenVDB adds when it writes (file_bbox_min/max of
 //     the active voxels, file_voxel_count, file_compression). Names must be unique.
 //   * Compression is OpenVDB's default: inactive values are not stored when a node has at most two of them
@@ -39,7 +40,7 @@ struct VdbGridOut {
 };
 
 struct VdbTransformOut {
-  double voxel_size = 1;
+  Vec3d spacing{1, 1, 1};  ///< the voxel's size along x, y and z
   Vec3d translation;  ///< world position of voxel (0, 0, 0)
 };
 

@@ -19,8 +19,7 @@ namespace {
 // No limit (or a nonsensical one): no distance inside the grid exceeds its diagonal, so that is a safe background.
 float levelSetBackground(const Grid& grid, float background) {
   if (std::isfinite(background) && background > 0) return background;
-  const Coord d = grid.dims();
-  return float(grid.voxelSize() * std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z));
+  return float(grid.diagonalWorld(grid.dims()));
 }
 
 // The leaf has the brick's layout (offset (x<<6)|(y<<3)|z, bit i of the mask = voxel i): the masked values are
@@ -133,7 +132,7 @@ Status VdbFieldBuilder::write(const std::string& path) {
   }
   const std::string tmp = path + ".tmp";
   std::error_code ec;
-  if (Status s = writeVdbFile(tmp, grids, {grid_.voxelSize(), grid_.origin()}); !s.ok()) {
+  if (Status s = writeVdbFile(tmp, grids, {grid_.spacing(), grid_.origin()}); !s.ok()) {
     std::filesystem::remove(tmp, ec);
     return s.withPrefix(fmt::format("{}: cannot write the VDB file", path));
   }

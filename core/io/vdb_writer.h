@@ -6,8 +6,8 @@
 // order, as they arrive (each brick becomes one leaf: brick origin = leaf origin, the masked voxels become active
 // values). finish() (called by write() if needed) flood-fills the signs as OpenVDB's signedFloodFill would, so every
 // voxel never delivered reads +background outside and -background inside. The file holds one grid named "distance",
-// class level set, with a transform of voxel size h and translation = grid origin (so voxel (i,j,k) is at
-// origin + h*(i,j,k), as in core/grid.h), metadata "distband_dims" and, after setRunState(), "distband_complete" and
+// class level set, with a transform of the grid's spacing and translation = grid origin (so voxel (i,j,k) is at
+// origin + spacing*(i,j,k), as in core/grid.h), metadata "distband_dims" and, after setRunState(), "distband_complete" and
 // "distband_segments". write() goes through `path + ".tmp"` and a rename, so a reader never sees a half-written file.
 // Not thread-safe; one builder per output (add(segment) fills the segment's leaves in parallel on the caller's TBB
 // arena). The embedded CLI and the service's client both stream bricks into it.

@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <cmath>
 #include <memory>
+#include <type_traits>
 
 #include <malloc.h>
 
@@ -80,10 +81,10 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
   const size_t nt = mesh.triangles.size();
   if (nt >= kNoSite) return Status::ResourceExhausted(fmt::format("the mesh has {} triangles, more than the engine's {} sites", nt, kNoSite - 1));
 
-  // Index-space copies, in parallel: serial, these loops were ~20 ms of a 52 k-triangle mesh's seeds.
-  std::vector<Vec3d> verts(mesh.vertices.size());  // index space
+  // Unit-space copies (core/grid.h), in parallel: serial, these loops were ~20 ms of a 52 k-triangle mesh's seeds.
+  std::vector<Vec3d> verts(mesh.vertices.size());  // unit space
   tbb::parallel_for(tbb::blocked_range<size_t>(0, verts.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t v = r.begin(); v != r.end(); ++v) verts[v] = grid.indexOf(mesh.vertices[v]);
+    for (size_t v = r.begin(); v != r.end(); ++v) verts[v] = grid.unitsOf(mesh.vertices[v]);
   });
   std::vector<std::array<Vec3d, 3>> tris(nt);
   std::vector<Vec3d> normals(nt);
@@ -95,21 +96,25 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
     }
   });
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
-  const double radius = std::min(options.band_radius_voxels, options.limit_voxels);
+  // The band's radius in units: on an anisotropic grid a voxel step along an axis is up to maxAxisScale() units, and
+  // the band must hold voxels on both sides of the surface along every axis.
+  const double radius = std::min(options.band_radius_voxels * grid.maxAxisScale(), options.limit_voxels);
   const double r2 = radius * radius;
   const Coord dims = grid.dims();
+  const Vec3d scale = grid.axisScale();
+  const bool scaled = !grid.cubic();
 
   // Voxel box of each triangle's radius-neighbourhood, clipped to the grid (lo > hi: nothing to scan).
   auto voxelBox = [&](size_t t, Coord* lo, Coord* hi) {
     const auto& tri = tris[t];
-    auto range = [&](double a, double b, double c, int n, int32_t* l, int32_t* h) {
-      const double mn = std::min({a, b, c}) - radius, mx = std::max({a, b, c}) + radius;
-      *l = static_cast<int32_t>(std::max(0.0, std::ceil(mn)));
-      *h = static_cast<int32_t>(std::min(double(n - 1), std::floor(mx)));
+    auto range = [&](double a, double b, double c, double s, int n, int32_t* l, int32_t* h) {
+      const double mn = std::min({a, b, c}) - radius, mx = std::max({a, b, c}) + radius;  // units
+      *l = static_cast<int32_t>(std::max(0.0, std::ceil(scaled ? mn / s : mn)));
+      *h = static_cast<int32_t>(std::min(double(n - 1), std::floor(scaled ? mx / s : mx)));
     };
-    range(tri[0].x, tri[1].x, tri[2].x, dims.x, &lo->x, &hi->x);
-    range(tri[0].y, tri[1].y, tri[2].y, dims.y, &lo->y, &hi->y);
-    range(tri[0].z, tri[1].z, tri[2].z, dims.z, &lo->z, &hi->z);
+    range(tri[0].x, tri[1].x, tri[2].x, scale.x, dims.x, &lo->x, &hi->x);
+    range(tri[0].y, tri[1].y, tri[2].y, scale.y, dims.y, &lo->y, &hi->y);
+    range(tri[0].z, tri[1].z, tri[2].z, scale.z, dims.z, &lo->z, &hi->z);
     return lo->x <= hi->x && lo->y <= hi->y && lo->z <= hi->z;
   };
   // 1. (brick, triangle) candidates: every brick a triangle's neighbourhood overlaps.
@@ -142,10 +147,16 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
   starts.push_back(cand.size());
   const size_t nbricks = starts.size() - 1;
 
-  // 2. Per brick: each voxel's closest triangle among its candidates, kept when within the radius.
+  // 2. Per brick: each voxel's closest triangle among its candidates, kept when within the radius. Compiled twice: on
+  // a cubic grid voxel coordinates are unit-space coordinates; on an anisotropic one they are scaled (and unit-space
+  // bounds divided back into voxel coordinates).
   std::vector<std::vector<BandVoxel>> per_brick(nbricks);
-  tbb::parallel_for(size_t(0), nbricks, [&](size_t b) {
-    if (tbb::is_current_task_group_canceling()) return;
+  auto scanBrick = [&](size_t b, auto scaled_tag) {
+    constexpr bool kScaled = decltype(scaled_tag)::value;
+    auto unitsX = [&](int x) { return kScaled ? x * scale.x : double(x); };
+    auto unitsY = [&](int y) { return kScaled ? y * scale.y : double(y); };
+    auto unitsZ = [&](int z) { return kScaled ? z * scale.z : double(z); };
+    auto voxelZ = [&](double u) { return kScaled ? u / scale.z : u; };
     const int64_t key = cand[starts[b]].brick;
     const Coord borg = grid.brickOrigin(key);
     std::array<double, kBrickVoxels> best;
@@ -166,32 +177,35 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
       const double by0 = std::min({tri[0].y, tri[1].y, tri[2].y}), by1 = std::max({tri[0].y, tri[1].y, tri[2].y});
       const double bz0 = std::min({tri[0].z, tri[1].z, tri[2].z}), bz1 = std::max({tri[0].z, tri[1].z, tri[2].z});
       for (int x = lo.x; x <= hi.x; ++x) {
-        const double ex = x < bx0 ? bx0 - x : (x > bx1 ? x - bx1 : 0.0);
+        const double ux = unitsX(x);
+        const double ex = ux < bx0 ? bx0 - ux : (ux > bx1 ? ux - bx1 : 0.0);
         for (int y = lo.y; y <= hi.y; ++y) {
           // Only the z-run within the radius of the triangle's bounding box can hold band voxels.
-          const double ey = y < by0 ? by0 - y : (y > by1 ? y - by1 : 0.0);
+          const double uy = unitsY(y);
+          const double ey = uy < by0 ? by0 - uy : (uy > by1 ? uy - by1 : 0.0);
           const double exy2 = ex * ex + ey * ey;
           const double rest = r2 - exy2;
           if (rest < 0) continue;
           const double reach = std::sqrt(rest);
-          int z0 = std::max(lo.z, ceilInt(bz0 - reach)), z1 = std::min(hi.z, floorInt(bz1 + reach));
-          const double row_plane = n.x * x + n.y * y - plane0;
+          int z0 = std::max(lo.z, ceilInt(voxelZ(bz0 - reach))), z1 = std::min(hi.z, floorInt(voxelZ(bz1 + reach)));
+          const double row_plane = n.x * ux + n.y * uy - plane0;
           // ... and within the radius of the triangle's plane (when the plane is not nearly parallel to z).
           if (std::abs(n.z) > 0.25) {
             const double za = (-radius - row_plane) / n.z, zb = (radius - row_plane) / n.z;
-            z0 = std::max(z0, ceilInt(std::min(za, zb)));
-            z1 = std::min(z1, floorInt(std::max(za, zb)));
+            z0 = std::max(z0, ceilInt(voxelZ(std::min(za, zb))));
+            z1 = std::min(z1, floorInt(voxelZ(std::max(za, zb))));
           }
           for (int z = z0; z <= z1; ++z) {
-            const double plane = row_plane + n.z * z;
+            const double uz = unitsZ(z);
+            const double plane = row_plane + n.z * uz;
             const int o = brickOffset(x & 7, y & 7, z & 7);
             if (plane * plane > best[o]) continue;
             // The bounding box is no farther than the triangle: a voxel already closer than it to another triangle
             // skips the exact distance (most do: the triangles near a voxel overlap). The margin is far above
             // rounding, so a tie or a closer triangle is never skipped.
-            const double ez = z < bz0 ? bz0 - z : (z > bz1 ? z - bz1 : 0.0);
+            const double ez = uz < bz0 ? bz0 - uz : (uz > bz1 ? uz - bz1 : 0.0);
             if (exy2 + ez * ez > best[o] + kBoxPruneMargin) continue;
-            const double d2 = dist.dist2({double(x), double(y), double(z)});
+            const double d2 = dist.dist2({ux, uy, uz});
             if (d2 < best[o] || (d2 == best[o] && t < best_t[o])) best[o] = d2, best_t[o] = t;
           }
         }
@@ -202,6 +216,10 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
     v.reserve(size_t(std::count_if(best_t.begin(), best_t.end(), [](uint32_t t) { return t != kNoSite; })));
     for (int o = 0; o < kBrickVoxels; ++o)
       if (best_t[o] != kNoSite) v.push_back({borg + brickLocal(o), best_t[o]});
+  };
+  tbb::parallel_for(size_t(0), nbricks, [&](size_t b) {
+    if (tbb::is_current_task_group_canceling()) return;
+    scaled ? scanBrick(b, std::true_type{}) : scanBrick(b, std::false_type{});
   });
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   const size_t scratch_bytes = cand.size() * sizeof(Candidate);
@@ -244,7 +262,7 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
       if (tbb::is_current_task_group_canceling()) return;
       BandVoxel& bv = seeds.band[i];
       const auto& tri = tris[bv.site];
-      const Vec3d p{double(bv.voxel.x), double(bv.voxel.y), double(bv.voxel.z)};
+      const Vec3d p{bv.voxel.x * scale.x, bv.voxel.y * scale.y, bv.voxel.z * scale.z};  // units
       seeds.points[i] = closestPointOnTriangle(p, tri[0], tri[1], tri[2]);
       if (!site_triangle->empty()) (*site_triangle)[i] = bv.site;
       seeds.site_feature[i] = bv.site;
@@ -261,8 +279,8 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
     std::shared_ptr<const MeshSign> sign = std::move(built);
     const double voxel_size = grid.voxelSize();
     if (site_triangle->empty()) site_triangle.reset();
-    seeds.sign = [sign, site_triangle, voxel_size](Brick& brick, const uint32_t* sites) {
-      sign->signBrick(brick, sites, site_triangle ? site_triangle->data() : nullptr, voxel_size);
+    seeds.sign = [sign, site_triangle, voxel_size, scale](Brick& brick, const uint32_t* sites) {
+      sign->signBrick(brick, sites, site_triangle ? site_triangle->data() : nullptr, voxel_size, scale);
     };
   }
   if (seeds.kind == SiteKind::kTriangle) seeds.triangles = std::move(tris);

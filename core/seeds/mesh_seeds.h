@@ -3,8 +3,10 @@
 // point–triangle scan, brick by brick, in parallel on the caller's TBB arena); each band voxel gets its exact
 // closest triangle (ties: the lowest triangle index, so the band is deterministic). The band thus holds every
 // voxel whose cell the surface crosses (distance <= sqrt(3)/2) and, with the default radius 1.5, their face
-// neighbours and most edge neighbours. Band voxels farther than `limit_voxels` are dropped.
-//   * kExactFeature (default): sites are the mesh's triangles in index space (Seeds::kTriangle); the engine
+// neighbours and most edge neighbours. Band voxels farther than `limit_voxels` are dropped. Distances are measured in
+// unit space (core/grid.h); on an anisotropic grid the radius is multiplied by the largest axis scale, so the band
+// holds voxels on both sides of the surface along every axis.
+//   * kExactFeature (default): sites are the mesh's triangles in unit space (Seeds::kTriangle); the engine
 //     propagates triangle ids and evaluates the exact point–triangle distance where they arrive.
 //   * kPaper: sites are the band voxels' closest points (Seeds::kPoint), propagated as CP + PQ (paper eq. 2);
 //     each site remembers its triangle for the sign.

@@ -198,8 +198,8 @@ struct MeshSign::Tables {
   void buildPseudonormals(const Interrupter* interrupter);
   void buildBoundaryDistances();
   std::once_flag boundary_once;
-  bool signWindingCertified(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle,
-                            double voxel_size) const;
+  bool signWindingCertified(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
+                            const Vec3d& scale) const;
 };
 
 void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
@@ -352,16 +352,16 @@ void MeshSign::Tables::buildBoundaryDistances() {
 // takes a winding query per voxel. The margins cover the turn of the winding number around the boundary curves
 // across the brick and the hierarchy's error.
 bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle,
-                                            double voxel_size) const {
+                                            double voxel_size, const Vec3d& scale) const {
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
   const auto at = [&](int i) {
     const Coord c = brick.origin + brickLocal(i);
-    return Vec3d{double(c.x), double(c.y), double(c.z)};
+    return Vec3d{c.x * scale.x, c.y * scale.y, c.z * scale.z};
   };
   int ref = -1, n = 0;
   double ref_to_center = std::numeric_limits<double>::infinity(), boundary = kFarFromBoundary;
   Vec3d normal{};
-  const Vec3d center{brick.origin.x + 3.5, brick.origin.y + 3.5, brick.origin.z + 3.5};
+  const Vec3d center{(brick.origin.x + 3.5) * scale.x, (brick.origin.y + 3.5) * scale.y, (brick.origin.z + 3.5) * scale.z};
   for (int w = 0; w < kBrickVoxels / 64; ++w)
     for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1) {
       const int i = w * 64 + std::countr_zero(bits);
@@ -448,8 +448,10 @@ bool MeshSign::inside(const Vec3d& p, uint32_t triangle, double distance) const 
   }
 }
 
-void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size) const {
+void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
+                         const Vec3d& scale) const {
   const Tables& s = *tables_;
+  auto unitsOf = [&scale](const Coord& c) { return Vec3d{c.x * scale.x, c.y * scale.y, c.z * scale.z}; };
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
   if (method_ == SignMethod::kPseudonormal) {
     // Pseudonormal signs (closed meshes, whose sign only changes across the surface), visiting only the delivered
@@ -457,7 +459,7 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
     // brick's neighbouring voxels mostly share their closest triangle). A voxel farther from the surface than the
     // brick is wide (plus a margin for rounding) sees no surface inside the brick, so one sign test signs every
     // voxel of it; most bricks beyond a few voxels are like this.
-    constexpr double kBrickDiameter = 7 * 1.7320508075688772 + 0.5;
+    const double brick_diameter = 7 * std::sqrt(scale.lengthSqr()) + 0.5;  // units
     auto forEachDelivered = [&](auto&& visit) {
       for (int w = 0; w < kBrickVoxels / 64; ++w)
         for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1)
@@ -465,12 +467,11 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
     };
     int far = -1;
     forEachDelivered([&](int i) {
-      if (sites[i] != kNoSite && std::abs(brick.values[i]) > kBrickDiameter * voxel_size) far = i;
+      if (sites[i] != kNoSite && std::abs(brick.values[i]) > brick_diameter * voxel_size) far = i;
       return far < 0;
     });
     if (far >= 0) {
-      const Coord c = brick.origin + brickLocal(far);
-      const Vec3d p{double(c.x), double(c.y), double(c.z)};
+      const Vec3d p = unitsOf(brick.origin + brickLocal(far));
       if (s.insidePseudonormal(p, triangleOf(sites[far]), std::abs(brick.values[far]) / voxel_size))
         forEachDelivered([&](int i) {
           brick.values[i] = -std::abs(brick.values[i]);
@@ -488,8 +489,7 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
         v0 = s.verts[s.corners[t][0]];
         last = t;
       }
-      const Coord c = brick.origin + brickLocal(i);
-      const Vec3d p{double(c.x), double(c.y), double(c.z)};
+      const Vec3d p = unitsOf(brick.origin + brickLocal(i));
       const double dist = std::abs(brick.values[i]) / voxel_size;
       // insidePseudonormal, with the plane kept (the same arithmetic as Normal3f::dot).
       const Vec3d q = p - v0;
@@ -503,7 +503,7 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
   if (method_ == SignMethod::kWinding) {
     // Isolated: a thread that waits for the build inside it must not pick up another brick's task meanwhile.
     std::call_once(tables_->boundary_once, [&] { tbb::this_task_arena::isolate([&] { tables_->buildBoundaryDistances(); }); });
-    if (s.signWindingCertified(brick, sites, site_triangle, voxel_size)) return;
+    if (s.signWindingCertified(brick, sites, site_triangle, voxel_size, scale)) return;
   }
   // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
   // surface. A voxel's distance to the surface is a ball around it that no surface crosses: parity is constant there,
@@ -520,8 +520,7 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
   std::vector<Ball> balls;
   for (int i = 0; i < kBrickVoxels; ++i) {
     if (!brick.mask.test(i)) continue;
-    const Coord c = brick.origin + brickLocal(i);
-    const Vec3d p{double(c.x), double(c.y), double(c.z)};
+    const Vec3d p = unitsOf(brick.origin + brickLocal(i));
     bool in = false;
     bool found = false;
     for (auto it = balls.rbegin(); it != balls.rend(); ++it) {

@@ -69,10 +69,12 @@ class MeshSign {
   /// by the pseudonormal test only.
   bool inside(const Vec3d& p, uint32_t triangle, double distance) const;
 
-  /// Negates the delivered values of `brick` (index space, voxel (x, y, z) at the point (x, y, z); values in world
-  /// units, `voxel_size` per index unit) that lie inside. `sites[i]` is the site of voxel offset i (kNoSite: none);
-  /// `site_triangle` maps a site to its triangle (null: the site is the triangle).
-  void signBrick(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size) const;
+  /// Negates the delivered values of `brick` that lie inside. The frame is the grid's unit space: voxel (x, y, z) at
+  /// the point scale * (x, y, z) (core/grid.h: Grid::axisScale, all 1 on a cubic grid); values in world units,
+  /// `voxel_size` per unit. `sites[i]` is the site of voxel offset i (kNoSite: none); `site_triangle` maps a site to
+  /// its triangle (null: the site is the triangle).
+  void signBrick(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
+                 const Vec3d& scale = {1, 1, 1}) const;
 
   /// Bytes held (for memory budgets).
   uint64_t memoryBytes() const;

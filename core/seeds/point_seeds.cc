@@ -20,12 +20,14 @@ Status makePointSeeds(const Grid& grid, const std::vector<Vec3d>& world_points, 
     const Vec3d& w = world_points[i];
     if (!(std::isfinite(w.x) && std::isfinite(w.y) && std::isfinite(w.z)))
       return Status::InvalidArgument(fmt::format("point {} has a non-finite coordinate", i));
-    const Vec3d p = grid.indexOf(w);
+    const Vec3d p = grid.unitsOf(w);  // the site, in unit space
     seeds.points.push_back(p);
+    const Vec3d& r = grid.axisScale();
     auto nearest = [](double v, int lo, int n) {
       return static_cast<int>(std::clamp(std::lround(std::clamp(v, -1e9, 1e9)) - lo, 0L, long(n - 1)));
     };
-    const Coord c{nearest(p.x, box.min.x, dims.x), nearest(p.y, box.min.y, dims.y), nearest(p.z, box.min.z, dims.z)};
+    const Coord c{nearest(p.x / r.x, box.min.x, dims.x), nearest(p.y / r.y, box.min.y, dims.y),
+                  nearest(p.z / r.z, box.min.z, dims.z)};
     for (int dz = -1; dz <= 1; ++dz)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {

@@ -3,7 +3,7 @@
 // block around its nearest in-grid voxel. Unsigned. Returns kInvalidArgument (and leaves `out` untouched) for an
 // empty list or non-finite coordinates.
 // With `window` (a box of the grid) the seeds are for the engine grid grid.window(*window): the sites stay in the
-// whole grid's index space (Seeds::site_offset = window->min), so a tile's distances are bit-identical to the whole
+// whole grid's unit space (Seeds::site_offset = window->min), so a tile's distances are bit-identical to the whole
 // grid's, and a point outside the window seeds the block around its nearest window voxel.
 #pragma once
 

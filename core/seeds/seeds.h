@@ -1,15 +1,17 @@
 // Seeds: what the engine propagates from — the initial band and the table of sites it refers to.
 // Contract: a seed source (points, volume, mesh: see core/seeds/) builds a Seeds for one Grid. The engine reads
 // it without modifying it, from many threads at once.
-//   * A *site* is a closest-feature candidate. kPoint sites are positions (index space, voxel units); kTriangle
-//     sites are triangles (index space) and a voxel's distance to one is the exact point–triangle distance.
+//   * A *site* is a closest-feature candidate. kPoint sites are positions in unit space (core/grid.h: index space on a
+//     cubic grid, voxel units); kTriangle sites are triangles (unit space) and a voxel's distance to one is the exact
+//     point–triangle distance.
 //   * `band` lists the voxels the propagation starts from, each with its site; the engine computes their
 //     distances from the site itself. kNoSite marks a voxel whose distance is 0 and that offers nothing to its
 //     neighbours (the interior of a seed volume). With `band_exact` the band's sites are final.
 //   * `region` (optional, dense x-fastest, one byte per voxel): propagation never crosses between voxels of
 //     different labels (used for signed seed volumes, where inside and outside have different site sets).
-//   * `site_offset`: sites are in the index space of a larger grid of which the engine's grid is the window at
-//     site_offset (a tile of a query split over servers); voxel c is at c + site_offset there. Zero otherwise.
+//   * `site_offset`: sites are in the unit space of a larger grid of which the engine's grid is the window at
+//     site_offset (a tile of a query split over servers); voxel c is at (c + site_offset) * axis scale there. Zero
+//     otherwise.
 //   * Closest features (BandOptions::closest_features): kSiteIndex reports site_feature[site], or the site index
 //     itself when site_feature is empty (triangle ids, point indices); kSiteVoxel reports the voxel a point site
 //     sits on as its linear index in the engine's grid (Grid::denseIndex; volumes, whose sites are boundary
@@ -42,8 +44,8 @@ struct BandVoxel {
 
 struct Seeds {
   SiteKind kind = SiteKind::kPoint;
-  std::vector<Vec3d> points;                    ///< kPoint sites, index space
-  std::vector<std::array<Vec3d, 3>> triangles;  ///< kTriangle sites, index space
+  std::vector<Vec3d> points;                    ///< kPoint sites, unit space
+  std::vector<std::array<Vec3d, 3>> triangles;  ///< kTriangle sites, unit space
   std::vector<BandVoxel> band;
   /// True when every band voxel's site is already its closest site (mesh and volume seeds): the engine then
   /// never offers anything to band voxels, which saves most of the work of thin bands.

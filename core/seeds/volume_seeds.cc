@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cstring>
 #include <iterator>
+#include <limits>
 #include <memory>
 
 #include <fmt/format.h>
@@ -24,54 +25,32 @@ struct Slice {
 
 }  // namespace
 
-// Nothing here allocates per grid voxel beyond the signed case's region (1 byte a voxel, which the engine needs): a
-// dense table of site ids would take 4 bytes a voxel (4 GiB at 1024^3), and filling it, one thread first-touching
-// every page, seconds that a cancel could not interrupt.
-namespace {
-
-// Whether any byte of `mask` is nonzero (want_zero = false) or zero (true): 8 bytes a step, 1 MiB slices on the
-// caller's TBB arena, every slice stopping once one found it (one byte at a time on one thread, a whole-grid field's
-// 128 MiB would be 0.5 % of a 1-thread run, a serial part that 16 threads would not share).
-bool maskHas(const std::vector<uint8_t>& mask, bool want_zero) {
-  constexpr size_t kSlice = size_t(1) << 20;
-  std::atomic<bool> found{false};
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, (mask.size() + kSlice - 1) / kSlice, 1),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                      for (size_t s = r.begin(); s != r.end() && !found.load(std::memory_order_relaxed); ++s) {
-                        const uint8_t* p = mask.data() + s * kSlice;
-                        const size_t n = std::min(kSlice, mask.size() - s * kSlice);
-                        size_t i = 0;
-                        for (; i + 8 <= n; i += 8) {
-                          uint64_t w;
-                          std::memcpy(&w, p + i, 8);
-                          // A zero byte: the classic (w - 0x01..) & ~w & 0x80.. test.
-                          const bool hit = want_zero ? ((w - 0x0101010101010101ull) & ~w & 0x8080808080808080ull) != 0
-                                                     : w != 0;
-                          if (hit) break;
-                        }
-                        for (; i < n; ++i)
-                          if ((p[i] == 0) == want_zero) break;
-                        if (i < n) found.store(true, std::memory_order_relaxed);
-                      }
-                    });
-  return found.load();
-}
-
-}  // namespace
-
-Status checkSeedMask(const std::vector<uint8_t>& mask, bool signed_distance) {
-  if (!maskHas(mask, false)) return Status::InvalidArgument("the seed mask has no nonzero voxel");
-  if (signed_distance && !maskHas(mask, true)) return Status::InvalidArgument("the seed mask has no zero voxel, so a signed field is undefined");
+Status checkVolumeMeasure(const LabelVolume& volume, const VolumeMeasure& measure) {
+  if (measure.labels) {
+    if (!measure.black_border && volume.at(0) != 0 && !volumeHasTwoLabels(volume))
+      return Status::InvalidArgument(fmt::format(
+          "every voxel has label {}: no voxel of another label, so the distance is undefined (a black border gives "
+          "the grid's outside label 0)",
+          volume.at(0)));
+    return Status::Ok();
+  }
+  if (!volumeHas(volume, false)) return Status::InvalidArgument("the seed volume has no nonzero voxel");
+  if (measure.inside_negative && !volumeHas(volume, true))
+    return Status::InvalidArgument("the seed volume has no zero voxel, so a signed field is undefined");
   return Status::Ok();
 }
 
-Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance, Seeds* out,
-                            const Interrupter* interrupter) {
-  if (static_cast<int64_t>(mask.size()) != grid.voxelCount())
-    return Status::InvalidArgument(fmt::format("mask has {} voxels, the grid {}", mask.size(), grid.voxelCount()));
+namespace {
+
+// Nothing here allocates per grid voxel beyond the signed case's region (1 byte a voxel, which the engine needs): a
+// dense table of site ids would take 4 bytes a voxel (4 GiB at 1024^3), and filling it, one thread first-touching
+// every page, seconds that a cancel could not interrupt.
+template <class T>
+Status buildVolumeSeeds(const Grid& grid, const LabelVolume& volume, const T* labels, bool signed_distance, Seeds* out,
+                        const Interrupter* interrupter) {
   const Coord d = grid.dims();
   const int64_t sy = d.x, sz = int64_t(d.x) * d.y;
-  auto inside = [&](int64_t i) { return mask[i] != 0; };
+  auto inside = [&](int64_t i) { return labels[i] != 0; };
   // A voxel is on its side's boundary when a 6-neighbour lies on the other side.
   auto onBoundary = [&](int x, int y, int z, int64_t i) {
     const bool in = inside(i);
@@ -105,7 +84,8 @@ Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool 
       return Status::ResourceExhausted(fmt::format("the seed mask has more than {} boundary voxels", kNoSite - 1));
     first_site[z + 1] = uint32_t(next);
   }
-  if (n_inside == 0 || (signed_distance && n_inside == grid.voxelCount())) return checkSeedMask(mask, signed_distance);
+  if (n_inside == 0 || (signed_distance && n_inside == grid.voxelCount()))
+    return checkVolumeMeasure(volume, {false, signed_distance, false});
 
   if (signed_distance) {
     // 2. Each boundary voxel starts with the nearest voxel across the boundary (a 6-neighbour, distance 1): the
@@ -115,6 +95,9 @@ Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool 
       const auto& b = slices[size_t(zj)].boundary;
       return first_site[size_t(zj)] + uint32_t(std::lower_bound(b.begin(), b.end(), j) - b.begin());
     };
+    // On an anisotropic grid the nearest of them is along the axis of the smallest scale: the nearest first, then
+    // the lowest id (its site must be offered: propagation never crosses the boundary to bring it).
+    const Vec3d scale = grid.axisScale();
     tbb::parallel_for(0, d.z, [&](int z) {
       if (stop()) return;
       Slice& s = slices[size_t(z)];
@@ -123,16 +106,20 @@ Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool 
         const int x = int(i % sy), y = int((i / sy) % d.y);
         const bool in = inside(i);
         uint32_t best = kNoSite;
+        double best_step = std::numeric_limits<double>::infinity();
         // A 6-neighbour on the other side is itself on the boundary, so it has a site.
-        auto consider = [&](bool ok, int64_t j) {
-          if (ok && inside(j) != in) best = std::min(best, siteOf(j));
+        auto consider = [&](bool ok, int64_t j, double step) {
+          if (!ok || inside(j) == in || step > best_step) return;
+          const uint32_t site = siteOf(j);
+          if (step < best_step || site < best) best = site;
+          best_step = step;
         };
-        consider(x > 0, i - 1);
-        consider(x + 1 < d.x, i + 1);
-        consider(y > 0, i - sy);
-        consider(y + 1 < d.y, i + sy);
-        consider(z > 0, i - sz);
-        consider(z + 1 < d.z, i + sz);
+        consider(x > 0, i - 1, scale.x);
+        consider(x + 1 < d.x, i + 1, scale.x);
+        consider(y > 0, i - sy, scale.y);
+        consider(y + 1 < d.y, i + sy, scale.y);
+        consider(z > 0, i - sz, scale.z);
+        consider(z + 1 < d.z, i + sz, scale.z);
         s.band.push_back({{x, y, z}, best});
       }
     });
@@ -151,7 +138,8 @@ Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool 
   for (size_t z = 0; z < slices.size(); ++z) {
     if (stop()) return interruptedStatus(interrupter);
     Slice& s = slices[z];
-    for (const int64_t i : s.boundary) seeds.points.push_back({double(i % sy), double((i / sy) % d.y), double(z)});
+    for (const int64_t i : s.boundary)
+      seeds.points.push_back(grid.unitsOfIndex({double(i % sy), double((i / sy) % d.y), double(z)}));
     for (BandVoxel v : s.band) {
       if (!signed_distance && v.site != kNoSite) v.site += first_site[z];
       seeds.band.push_back(v);
@@ -164,13 +152,13 @@ Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool 
     // Which side each voxel is on, 0/1 (the engine keeps each side's distances to its own sites). Copied in 4 MiB
     // steps with a poll between them, for the same reason as above.
     auto region = std::make_shared<std::vector<uint8_t>>();
-    region->reserve(mask.size());
+    const size_t count = size_t(grid.voxelCount());
+    region->reserve(count);
     constexpr size_t kStep = size_t(4) << 20;
-    for (size_t i = 0; i < mask.size(); i += kStep) {
+    for (size_t i = 0; i < count; i += kStep) {
       if (stop()) return interruptedStatus(interrupter);
-      const size_t end = std::min(mask.size(), i + kStep);
-      std::transform(mask.begin() + int64_t(i), mask.begin() + int64_t(end), std::back_inserter(*region),
-                     [](uint8_t m) { return uint8_t(m != 0); });
+      const size_t end = std::min(count, i + kStep);
+      std::transform(labels + i, labels + end, std::back_inserter(*region), [](T m) { return uint8_t(m != 0); });
     }
     seeds.region = region;
     const Grid g = grid;
@@ -184,6 +172,18 @@ Status makeVolumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool 
   }
   *out = std::move(seeds);
   return Status::Ok();
+}
+
+}  // namespace
+
+Status makeVolumeSeeds(const Grid& grid, const LabelVolume& volume, bool signed_distance, Seeds* out,
+                       const Interrupter* interrupter) {
+  if (!volume || !(volume.dims() == grid.dims()))
+    return Status::InvalidArgument(fmt::format("the volume has {} voxels, the grid {}",
+                                               volume ? volume.voxelCount() : 0, grid.voxelCount()));
+  return volume.visit([&](const auto* labels) {
+    return buildVolumeSeeds(grid, volume, labels, signed_distance, out, interrupter);
+  });
 }
 
 }  // namespace distband

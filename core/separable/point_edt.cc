@@ -27,8 +27,10 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr int kBlock = 16;  // x values per task: pass 3 then reads and writes 16 neighbours (64-128 bytes) at a time
 
 // The lower envelope of the parabolas t -> (t - apex[i])^2 + f[i], apexes strictly ascending, sampled at
-// t = t0 + q for q in [0, n): winner[q] is the index of the lowest there. `v` and `bound`: scratch of m and m + 1.
-void envelopeWinners(const double* apex, const double* f, int m, double t0, int n, int* v, double* bound,
+// t = (t0 + q) * step for q in [0, n) (step: the axis scale, unit space): winner[q] is the index of the lowest there.
+// `v` and `bound`: scratch of m and m + 1.
+template <bool kScaled>
+void envelopeWinners(const double* apex, const double* f, int m, double t0, double step, int n, int* v, double* bound,
                      int* winner) {
   int k = 0;
   v[0] = 0;
@@ -55,7 +57,7 @@ void envelopeWinners(const double* apex, const double* f, int m, double t0, int 
   }
   int j = 0;
   for (int q = 0; q < n; ++q) {
-    const double t = t0 + q;
+    const double t = kScaled ? (t0 + q) * step : t0 + q;
     while (bound[j + 1] < t) ++j;
     winner[q] = v[j];
   }
@@ -77,7 +79,7 @@ struct Layout {
   std::vector<Plane> planes;
 };
 
-// Points beyond double range in index space (a finite world point on a tiny voxel size) are infinitely far from every
+// Points beyond double range in unit space (a finite world point on a tiny voxel size) are infinitely far from every
 // voxel: they join no line, and if no point is left, every voxel's nearest is point 0, at an infinite distance.
 Layout layoutOf(const std::vector<Vec3d>& points) {
   Layout l;
@@ -120,11 +122,12 @@ void nearestOnLine(const Layout& l, const Line& line, double t, double* d2, uint
 using NearestPoints = std::vector<uint32_t, NoInitAllocator<uint32_t>>;  // a point index per grid voxel
 
 // Passes 1 to 3: each voxel's nearest point. False when interrupted.
-bool nearestPoints(const Coord& dims, const Coord& offset, const Layout& l, const Interrupter* interrupter,
-                   NearestPoints* out) {
+bool nearestPoints(const Coord& dims, const Coord& offset, const Vec3d& scale, const Layout& l,
+                   const Interrupter* interrupter, NearestPoints* out) {
   const int nx = dims.x, ny = dims.y, nz = dims.z;
   const int planes = int(l.planes.size());
   const size_t slice = size_t(nx) * ny;
+  const auto envelope = scale == Vec3d{1, 1, 1} ? envelopeWinners<false> : envelopeWinners<true>;
   // Pass 2's result per (plane, y, x), x fastest: the squared distance to the plane's nearest point within it.
   std::vector<double, NoInitAllocator<double>> in_plane(size_t(planes) * slice);
   std::vector<uint32_t, NoInitAllocator<uint32_t>> in_plane_point(size_t(planes) * slice);
@@ -145,13 +148,13 @@ bool nearestPoints(const Coord& dims, const Coord& offset, const Layout& l, cons
       for (int j = 0; j < m; ++j) apex[size_t(j)] = l.lines[plane.first + j].y;
       for (int xb = r.cols().begin(); xb != r.cols().end(); ++xb)
         for (int x = xb * kBlock; x < std::min(nx, (xb + 1) * kBlock); ++x) {
-          const double tx = double(x) + offset.x;
+          const double tx = (double(x) + offset.x) * scale.x;
           for (int j = 0; j < m; ++j)
             nearestOnLine(l, l.lines[plane.first + j], tx, &f[size_t(j)], &f_point[size_t(j)]);
-          envelopeWinners(apex.data(), f.data(), m, double(offset.y), ny, v.data(), bound.data(), winner.data());
+          envelope(apex.data(), f.data(), m, double(offset.y), scale.y, ny, v.data(), bound.data(), winner.data());
           for (int y = 0; y < ny; ++y) {
             const int w = winner[size_t(y)];
-            const double dy = double(y) + offset.y - apex[size_t(w)];
+            const double dy = (double(y) + offset.y) * scale.y - apex[size_t(w)];
             const size_t at = size_t(k) * slice + size_t(y) * nx + x;
             in_plane[at] = dy * dy + f[size_t(w)];
             in_plane_point[at] = f_point[size_t(w)];
@@ -192,8 +195,8 @@ bool nearestPoints(const Coord& dims, const Coord& offset, const Layout& l, cons
           }
         }
         for (int i = 0; i < w; ++i) {
-          envelopeWinners(plane_z.data(), f.data() + size_t(i) * planes, planes, double(offset.z), nz, v.data(),
-                          bound.data(), winner.data());
+          envelope(plane_z.data(), f.data() + size_t(i) * planes, planes, double(offset.z), scale.z, nz, v.data(),
+                   bound.data(), winner.data());
           for (int z = 0; z < nz; ++z)
             column[size_t(z) * kBlock + i] = f_point[size_t(i) * planes + winner[size_t(z)]];
         }
@@ -205,7 +208,9 @@ bool nearestPoints(const Coord& dims, const Coord& offset, const Layout& l, cons
   return !isInterrupted(interrupter);
 }
 
-/// Every voxel of the grid, its distance computed from its nearest point as the band engine computes it.
+/// Every voxel of the grid, its distance computed from its nearest point as the band engine computes it (kScaled: on
+/// an anisotropic grid, from the voxel's unit-space position).
+template <bool kScaled>
 struct NearestPointSource : WholeGridBricks {
   static constexpr bool kHasFeatures = true;
   const Seeds& seeds;
@@ -213,7 +218,11 @@ struct NearestPointSource : WholeGridBricks {
   bool value(size_t, int, const Coord& c, double* d) const {
     if (!grid.contains(c)) return false;
     const Coord& o = seeds.site_offset;
-    const Vec3d p{double(c.x) + o.x, double(c.y) + o.y, double(c.z) + o.z};
+    Vec3d p{double(c.x + o.x), double(c.y + o.y), double(c.z + o.z)};
+    if constexpr (kScaled) {
+      const Vec3d& r = grid.axisScale();
+      p = {p.x * r.x, p.y * r.y, p.z * r.z};
+    }
     *d = std::sqrt((p - seeds.points[nearest[size_t(grid.denseIndex(c))]]).lengthSqr());
     return true;
   }
@@ -264,8 +273,9 @@ FieldRunResult computeSeparablePointField(const Grid& grid, const Seeds& seeds, 
     const Layout layout = layoutOf(seeds.points);
     NearestPoints nearest;
     const bool ok =
-        nearestPoints(grid.dims(), seeds.site_offset, layout, options.interrupter, &nearest) &&
-        emitSegments(grid, options, NearestPointSource{{grid}, seeds, nearest}, &result, on_segment);
+        nearestPoints(grid.dims(), seeds.site_offset, grid.axisScale(), layout, options.interrupter, &nearest) &&
+        (grid.cubic() ? emitSegments(grid, options, NearestPointSource<false>{{grid}, seeds, nearest}, &result, on_segment)
+                      : emitSegments(grid, options, NearestPointSource<true>{{grid}, seeds, nearest}, &result, on_segment));
     result.interrupted = !ok;
     result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   });

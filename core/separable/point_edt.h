@@ -4,7 +4,8 @@
 // Contract:
 //   * Seeds: kPoint seeds (core/seeds/point_seeds.h); only `points`, `site_offset` and `site_feature` are read.
 //     Every voxel of the grid is delivered with its distance to the nearest point, computed as the band engine
-//     computes it — (voxel + site_offset - point).lengthSqr() in double, its root times the voxel size, as float —
+//     computes it — ((voxel + site_offset) * axis scale - point).lengthSqr() in double (unit space, core/grid.h), its
+//     root times the voxel size, as float —
 //     so both algorithms deliver the same values, and a tile's values equal the whole grid's.
 //   * Method: points with equal z form a plane, points with equal (y, z) a line. Pass 1 finds, for each line and
 //     each x, the line's nearest point; pass 2, for each plane and (x, y), the lower envelope over the plane's lines
@@ -18,7 +19,7 @@
 //   * Streaming, threads, interrupter: as computeSeparableVolumeField (core/separable/volume_edt.h): segments nearest first
 //     after the whole field is known, chunks, bit-identical for any thread count, polled per task in every pass.
 //     Closest features (options.closest_features): the point's index, or site_feature[index] when that is set.
-//   * Points that are not finite in index space (a huge world coordinate on a tiny voxel size) are infinitely far, as
+//   * Points that are not finite in unit space (a huge world coordinate on a tiny voxel size) are infinitely far, as
 //     in the band: they are nobody's nearest point unless every point is such, and then every distance is infinite.
 // Errors (seed kind, no points, grid, a finite limit) throw std::invalid_argument.
 #pragma once
@@ -39,7 +40,7 @@ struct PointLayout {
   int64_t planes = 0;  ///< distinct z
 };
 
-/// The layout of `points` (any consistent coordinates: world or index space).
+/// The layout of `points` (any consistent coordinates: world, index or unit space).
 PointLayout pointLayout(const std::vector<Vec3d>& points);
 
 /// True when the separable point EDT's work beyond one pass over the grid (its per-line and per-plane passes) is at

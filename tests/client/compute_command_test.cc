@@ -202,7 +202,7 @@ TEST(ComputeCommandTest, UsageAndInputErrorsExitTwo) {
        "--resolution must be at least 2 voxels (got 0)"},
       {"unsupported_out",
        {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", tmp("f.txt")},
-       "--out " + tmp("f.txt") + ": expected a .vdb, .npy file"},
+       "--out " + tmp("f.txt") + ": expected a .vdb, .npy, .nii.gz file"},
       {"unwritable_out",
        {"compute", "--points", "1,1,1", "--dims", "8,8,8", "--out", "/nonexistent/d/f.npy"},
        "does not exist"},

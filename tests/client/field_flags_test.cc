@@ -79,10 +79,12 @@ TEST(FieldFlagsTest, ComputeAndQueryTakeTheSameFieldFlags) {
   if (!query.count("--mesh")) GTEST_SKIP() << "a build without the service has no query options";
 
   const std::vector<std::string> field = fieldFlagNames(AssetSeeds::kNo);
-  EXPECT_EQ(std::set<std::string>(field.begin(), field.end()),
-            (std::set<std::string>{"--mesh", "--points", "--volume", "--dims", "--voxel-size", "--origin",
-                                   "--resolution", "--padding", "--box", "--algorithm", "--stencil", "--mode", "--sign",
-                                   "--segment", "--limit", "--limit-voxels", "--second-ring", "--deadline"}));
+  EXPECT_EQ(
+      std::set<std::string>(field.begin(), field.end()),
+      (std::set<std::string>{
+          "--mesh",    "--points",       "--volume",      "--dims",     "--voxel-size", "--origin", "--resolution",
+          "--padding", "--box",          "--algorithm",   "--stencil",  "--mode",       "--sign",   "--segment",
+          "--limit",   "--limit-voxels", "--second-ring", "--deadline", "--spacing",    "--labels", "--black-border"}));
   for (const std::string& name : field) {
     ASSERT_TRUE(compute.count(name)) << name;
     ASSERT_TRUE(query.count(name)) << name;
@@ -148,6 +150,18 @@ TEST(FieldFlagsTest, ChoicesLeftOutStayUnsetForCore) {
   EXPECT_TRUE(std::isnan(s.outputLimit())) << "a limit in voxels is known once the grid is";
   EXPECT_TRUE(s.deadline(Interrupter::Clock::now()).has_value());
 
+  // A volume's spacing and origin stay unset unless given: the file's header, else core's default (overrideGeometry).
+  ASSERT_EQ(parse({"--volume", "v.nii.gz", "--labels", "--black-border"}, &s), "");
+  EXPECT_TRUE(s.request.labels && s.request.black_border);
+  EXPECT_FALSE(s.grid.spacing || s.grid.origin_given);
+  ASSERT_EQ(parse({"--volume", "v.nrrd", "--spacing", "0.5,0.5,2.5", "--origin", "1,2,3"}, &s), "");
+  EXPECT_EQ(*s.grid.spacing, (Vec3d{0.5, 0.5, 2.5}));
+  EXPECT_EQ(*s.grid.origin_given, (Vec3d{1, 2, 3}));
+  ASSERT_EQ(parse({"--volume", "v.npy", "--voxel-size", "2"}, &s), "");
+  EXPECT_EQ(*s.grid.spacing, (Vec3d{2, 2, 2})) << "--voxel-size v means --spacing v,v,v";
+  ASSERT_EQ(parse({"--points", "1,1,1", "--dims", "8,8,8", "--spacing", "1,1,3"}, &s), "");
+  EXPECT_EQ(*s.grid.spacing, (Vec3d{1, 1, 3}));
+
   ASSERT_EQ(parse({"--mesh", "m.obj", "--voxel-size", "0.1", "--box", "0,0,0,1,2,3", "--padding", "2"}, &s), "");
   EXPECT_EQ(*s.meshGridOptions().box_max, (Vec3d{1, 2, 3}));
   EXPECT_EQ(s.meshGridOptions().padding_voxels, 2);
@@ -201,6 +215,12 @@ TEST(FieldFlagsTest, EveryRefusalNamesItsFlag) {
       {{"--points", "1,1,1", "--dims", "8,8,8", "--segment", "-1"}, "--segment must be finite"},
       {{"--volume", "v.npy", "--second-ring"}, "--second-ring applies to meshes"},
       {{"--points", "1,1,1", "--dims", "8,8,8", "--deadline", "nan"}, "--deadline must be finite"},
+      {{"--volume", "v.nii", "--spacing", "1,1"}, "--spacing '1,1'"},
+      {{"--volume", "v.nii", "--spacing", "1,0,1"}, "--spacing '1,0,1': every spacing must be > 0"},
+      {{"--volume", "v.nii", "--spacing", "1,1,1", "--voxel-size", "1"}, "--spacing and --voxel-size exclude"},
+      {{"--mesh", "m.obj", "--resolution", "8", "--spacing", "1,1,2"}, "--spacing applies to --dims"},
+      {{"--mesh", "m.obj", "--resolution", "8", "--labels"}, "--labels applies to volume seeds"},
+      {{"--volume", "v.npy", "--black-border"}, "--black-border applies with --labels"},
   };
   for (const auto& [args, expect] : cases) {
     FieldSpec s;

@@ -161,7 +161,7 @@ TEST(RemoteCliTest, EveryOutputProblemIsReportedBeforeAnyUpload) {
   const std::string missing_dir = f.path("no-such-dir") + "/field.vdb";
   const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
       {{"--out", missing_dir}, "--out " + missing_dir + ": directory"},
-      {{"--out", f.path("field.txt")}, "--out " + f.path("field.txt") + ": expected a .vdb, .npy file"},
+      {{"--out", f.path("field.txt")}, "--out " + f.path("field.txt") + ": expected a .vdb, .npy, .nii.gz file"},
       {{"--npy", f.path("field.vdb")}, "--npy"},
       {{"--slice-png", "z:4", f.path("slice.jpg")}, "--slice-png " + f.path("slice.jpg") + ": expected a .png file"},
       {{"--isosurface", "0.1", f.path("iso.stl")}, "--isosurface " + f.path("iso.stl") + ": expected a .obj file"},

@@ -161,7 +161,7 @@ TEST(ScaleOutTest, ClosestFeaturesCrossTilesIntact) {
   const Coord vdims{72, 70, 64};
   const auto mask = blobMask(vdims);
   v1::UploadReply up;
-  ASSERT_TRUE(cluster.coordinator->client().uploadVolume(vdims, mask, "blobs", &up).ok());
+  ASSERT_TRUE(cluster.coordinator->client().uploadVolumeBytes(vdims, v1::VOXEL_TYPE_UINT8, mask, "blobs", &up).ok());
   v1::QueryRequest r;
   r.set_asset_id(up.asset_id());
   r.mutable_grid()->set_voxel_size(1.0);
@@ -345,8 +345,8 @@ TEST(ScaleOutTest, SignedVolumeMatchesOneServer) {
   const auto mask = blobMask(dims);
   for (double limit : {4.0, 0.0}) {
     v1::UploadReply up_one, up_many;
-    ASSERT_TRUE(cluster.replicas[0]->client().uploadVolume(dims, mask, "blobs", &up_one).ok());
-    ASSERT_TRUE(cluster.coordinator->client().uploadVolume(dims, mask, "blobs", &up_many).ok());
+    ASSERT_TRUE(cluster.replicas[0]->client().uploadVolumeBytes(dims, v1::VOXEL_TYPE_UINT8, mask, "blobs", &up_one).ok());
+    ASSERT_TRUE(cluster.coordinator->client().uploadVolumeBytes(dims, v1::VOXEL_TYPE_UINT8, mask, "blobs", &up_many).ok());
     v1::QueryRequest r;
     r.set_sign(v1::SIGN_MODE_MASK_INSIDE);
     r.mutable_grid()->set_voxel_size(1.0);

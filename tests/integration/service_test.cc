@@ -142,12 +142,12 @@ TEST(ServiceTest, VolumeUploadAndSignedQueryMatchInProcess) {
         mask[(size_t(z) * dims.y + y) * dims.x + x] = d1 < 7.5 || d2 < 6.0;
       }
   v1::UploadReply up;
-  grpc::Status st = ts.client().uploadVolume(dims, mask, "blobs", &up);
+  grpc::Status st = ts.client().uploadVolumeBytes(dims, v1::VOXEL_TYPE_UINT8, mask, "blobs", &up);
   ASSERT_TRUE(st.ok()) << st.error_message();
   EXPECT_EQ(up.asset_id().rfind("volume-", 0), 0u);
   EXPECT_FALSE(up.already_cached());
   v1::UploadReply again;
-  ASSERT_TRUE(ts.client().uploadVolume(dims, mask, "blobs", &again).ok());
+  ASSERT_TRUE(ts.client().uploadVolumeBytes(dims, v1::VOXEL_TYPE_UINT8, mask, "blobs", &again).ok());
   EXPECT_TRUE(again.already_cached());
   EXPECT_EQ(again.asset_id(), up.asset_id());
 
@@ -164,7 +164,7 @@ TEST(ServiceTest, VolumeUploadAndSignedQueryMatchInProcess) {
 
   const Grid grid({0, 0, 0}, 0.25, dims);
   Seeds seeds;
-  ASSERT_TRUE(IsOk(makeVolumeSeeds(grid, mask, true, &seeds)));
+  ASSERT_TRUE(IsOk(makeVolumeSeeds(grid, LabelVolume::ofMask(grid.dims(), mask), true, &seeds)));
   BandOptions o;
   o.segment_length_world = 0.5;
   o.limit_world = 3.0;
@@ -476,7 +476,7 @@ TEST(ServiceTest, EachBadInputGetsItsStatusAndTheServerKeepsServing) {
             grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(ts.client().uploadMesh("v 1 2 3\n", v1::MeshFormat(99), "x", &up).error_code(),
             grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_EQ(ts.client().uploadVolume({2, 2, 2}, std::vector<uint8_t>(7, 1), "short", &up).error_code(),
+  EXPECT_EQ(ts.client().uploadVolumeBytes({2, 2, 2}, v1::VOXEL_TYPE_UINT8, std::vector<uint8_t>(7, 1), "short", &up).error_code(),
             grpc::StatusCode::INVALID_ARGUMENT);
   // A signed volume needs an outside: refused before compute, naming the field.
   v1::QueryRequest full;
@@ -502,11 +502,11 @@ TEST(ServiceTest, UploadLimitsAreEnforced) {
   o.cache_bytes = 4096;
   TestServer ts(o);
   v1::UploadReply up;
-  grpc::Status s = ts.client().uploadVolume({20, 10, 10}, std::vector<uint8_t>(2000, 1), "big", &up);
+  grpc::Status s = ts.client().uploadVolumeBytes({20, 10, 10}, v1::VOXEL_TYPE_UINT8, std::vector<uint8_t>(2000, 1), "big", &up);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
   // Fits the upload limit but not the cache.
   RemoteClient client("127.0.0.1:" + std::to_string(ts.server().port()));
-  s = client.uploadVolume({10, 10, 9}, std::vector<uint8_t>(900, 1), "ok", &up);
+  s = client.uploadVolumeBytes({10, 10, 9}, v1::VOXEL_TYPE_UINT8, std::vector<uint8_t>(900, 1), "ok", &up);
   EXPECT_TRUE(s.ok()) << s.error_message();
 }
 

@@ -225,6 +225,32 @@ class ClientTest(unittest.TestCase):
         band = np.abs(ref) < 2.0 - 1e-6
         self.assertLessEqual(np.abs(r.field[band] - ref[band]).max(), 0.05)
 
+    def test_label_volume_with_spacing_in_numpys_axis_order(self):
+        rng = np.random.default_rng(5)
+        labels = np.kron(rng.integers(0, 5, size=(6, 7, 8)), np.ones((4, 4, 4), np.int64)).astype(np.uint16)
+        sampling = (2.5, 0.5, 0.7)  # (Z, Y, X), as scipy's
+        r = distband_client.query_result(self.server.target, volume=labels, spacing=sampling, labels=True,
+                                         black_border=True)
+        self.assertEqual(r.header.spacing, (0.7, 0.5, 2.5))
+        self.assertTrue(r.header.labels and r.header.black_border)
+        padded = np.pad(labels, 1)
+        ref = np.zeros(labels.shape)
+        for v in np.unique(labels[labels > 0]):
+            d = ndimage.distance_transform_edt(padded == v, sampling=sampling)[1:-1, 1:-1, 1:-1]
+            ref[labels == v] = d[labels == v]
+        self.assertLessEqual(float(np.max(np.abs(r.field - ref) / (1 + ref))), 1e-5)
+        field, nearest = distband_client.query(self.server.target, volume=labels, spacing=sampling,
+                                               nearest_label=True)
+        _, idx = ndimage.distance_transform_edt(labels == 0, sampling=sampling, return_indices=True)
+        per = np.sort(np.stack([ndimage.distance_transform_edt(labels != v, sampling=sampling)
+                                for v in np.unique(labels[labels > 0])]), axis=0)
+        unique = per[1] - per[0] > 1e-4
+        np.testing.assert_array_equal(nearest[unique], labels[tuple(idx)][unique])
+        with self.assertRaises(ValueError):
+            distband_client.query(self.server.target, volume=labels, black_border=True)
+        with self.assertRaises(ValueError):
+            distband_client.query(self.server.target, points=[(1.0, 2.0, 3.0)], voxel_size=1.0, labels=True)
+
     # ---- meshes: the CLI's .npy, byte for byte ---------------------------------------------------------------
 
     def test_mesh_field_is_byte_identical_to_the_cli_npy(self):
@@ -311,7 +337,7 @@ class ClientTest(unittest.TestCase):
         self.assertRefused(ValueError, "dims must have 3", points=pts, dims=(8, 8), voxel_size=1.0)
         self.assertRefused(ValueError, "mesh='bunny.txt': unsupported mesh format", mesh="bunny.txt", resolution=32)
         self.assertRefused(ValueError, "cannot read the file", mesh="/nonexistent/bunny.obj", resolution=32)
-        self.assertRefused(TypeError, "volume must have dtype bool or uint8", volume=np.ones((4, 4, 4)))
+        self.assertRefused(TypeError, "volume must have dtype bool, uint8, uint16 or uint32", volume=np.ones((4, 4, 4)))
         self.assertRefused(ValueError, "volume must be 3-D", volume=np.ones((4, 4), bool))
         self.assertRefused(ValueError, "resolution cannot be combined", volume=np.ones((4, 4, 4), bool),
                            resolution=8)

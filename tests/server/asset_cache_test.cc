@@ -19,8 +19,7 @@ std::shared_ptr<const Asset> volume(const std::string& id, size_t mask_bytes, ui
   auto a = std::make_shared<Asset>();
   a->kind = Asset::Kind::kVolume;
   a->id = id;
-  a->dims = {int32_t(mask_bytes), 1, 1};
-  a->mask = std::make_shared<const std::vector<uint8_t>>(mask_bytes, fill);
+  a->volume = LabelVolume::ofMask({int32_t(mask_bytes), 1, 1}, std::vector<uint8_t>(mask_bytes, fill));
   return a;
 }
 
@@ -148,8 +147,8 @@ TEST(AssetCacheTest, EvictedAssetStaysAliveForItsHolder) {
   ASSERT_EQ(cache.find("volume-a"), nullptr);
   ASSERT_NE(held, nullptr);
   EXPECT_EQ(held->id, "volume-a");
-  ASSERT_EQ(held->mask->size(), kMask);
-  EXPECT_EQ((*held->mask)[kMask - 1], 7);
+  ASSERT_EQ(held->volume.bytes().size(), kMask);
+  EXPECT_EQ(held->volume.at(kMask - 1), 7u);
 }
 
 TEST(AssetCacheTest, MeshAssetsCostTheirVertices) {

@@ -133,211 +133,429 @@ const C kInvalid = C::kInvalidArgument;
 const RuleCase kRules[] = {
     // seeds
     {"NoSeeds", Base::kPointsOnDims, [](auto& r) { r.clear_points(); }, kInvalid, {"seeds"}},
-    {"EmptyPointList", Base::kPointsOnDims, [](auto& r) { r.mutable_points()->clear_points(); }, kInvalid,
+    {"EmptyPointList",
+     Base::kPointsOnDims,
+     [](auto& r) { r.mutable_points()->clear_points(); },
+     kInvalid,
      {"points.points"}},
-    {"NonFinitePoint", Base::kPointsOnDims,
-     [](auto& r) { r.mutable_points()->mutable_points(1)->set_y(kNaN); }, kInvalid, {"points.points[1]"}},
-    {"InfinitePoint", Base::kPointsOnDims,
-     [](auto& r) { r.mutable_points()->mutable_points(0)->set_x(kInf); }, kInvalid, {"points.points[0]"}},
+    {"NonFinitePoint",
+     Base::kPointsOnDims,
+     [](auto& r) { r.mutable_points()->mutable_points(1)->set_y(kNaN); },
+     kInvalid,
+     {"points.points[1]"}},
+    {"InfinitePoint",
+     Base::kPointsOnDims,
+     [](auto& r) { r.mutable_points()->mutable_points(0)->set_x(kInf); },
+     kInvalid,
+     {"points.points[0]"}},
     {"EmptyAssetId", Base::kPointsOnDims, [](auto& r) { r.set_asset_id(""); }, kInvalid, {"asset_id"}},
-    {"OverlongAssetId", Base::kPointsOnDims, [](auto& r) { r.set_asset_id(std::string(129, 'a')); }, kInvalid,
+    {"OverlongAssetId",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_asset_id(std::string(129, 'a')); },
+     kInvalid,
      {"asset_id"}},
-    {"UnknownAssetId", Base::kPointsOnDims, [](auto& r) { r.set_asset_id("volume-0123"); }, C::kNotFound,
+    {"UnknownAssetId",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_asset_id("volume-0123"); },
+     C::kNotFound,
      {"asset_id", "volume-0123"}},
     // enumerations
-    {"UnknownStencil", Base::kPointsOnDims, [](auto& r) { r.set_stencil(v1::Stencil(99)); }, kInvalid,
+    {"UnknownStencil",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_stencil(v1::Stencil(99)); },
+     kInvalid,
      {"stencil", "99"}},
-    {"UnknownAlgorithm", Base::kPointsOnDims, [](auto& r) { r.set_algorithm(v1::Algorithm(5)); }, kInvalid,
+    {"UnknownAlgorithm",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_algorithm(v1::Algorithm(5)); },
+     kInvalid,
      {"algorithm", "5"}},
-    {"SeparableWithALimit", Base::kPointsOnDims,
+    {"SeparableWithALimit",
+     Base::kPointsOnDims,
      [](auto& r) {
        r.set_algorithm(v1::ALGORITHM_SEPARABLE);
        r.set_limit(4);
      },
-     kInvalid, {"algorithm", "separable"}},
-    {"SeparableWithAStencil", Base::kVolume,
+     kInvalid,
+     {"algorithm", "separable"}},
+    {"SeparableWithAStencil",
+     Base::kVolume,
      [](auto& r) {
        r.set_algorithm(v1::ALGORITHM_SEPARABLE);
        r.set_stencil(v1::STENCIL_CUBIC26);
      },
-     kInvalid, {"algorithm", "stencil"}},
+     kInvalid,
+     {"algorithm", "stencil"}},
     {"UnknownMode", Base::kPointsOnDims, [](auto& r) { r.set_mode(v1::PropagationMode(3)); }, kInvalid, {"mode"}},
-    {"UnknownEncoding", Base::kPointsOnDims, [](auto& r) { r.set_encoding(v1::BrickEncoding(3)); }, kInvalid,
+    {"UnknownEncoding",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_encoding(v1::BrickEncoding(3)); },
+     kInvalid,
      {"encoding"}},
     {"UnknownSign", Base::kPointsOnDims, [](auto& r) { r.set_sign(v1::SignMode(7)); }, kInvalid, {"sign", "7"}},
     {"NegativeSign", Base::kPointsOnDims, [](auto& r) { r.set_sign(v1::SignMode(-1)); }, kInvalid, {"sign"}},
-    {"SignedPoints", Base::kPointsOnDims, [](auto& r) { r.set_sign(v1::SIGN_MODE_PSEUDONORMAL); }, kInvalid,
+    {"SignedPoints",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_sign(v1::SIGN_MODE_PSEUDONORMAL); },
+     kInvalid,
      {"sign", "SIGN_MODE_PSEUDONORMAL"}},
-    {"MaskInsidePoints", Base::kPointsOnDims, [](auto& r) { r.set_sign(v1::SIGN_MODE_MASK_INSIDE); }, kInvalid,
+    {"MaskInsidePoints",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_sign(v1::SIGN_MODE_MASK_INSIDE); },
+     kInvalid,
      {"sign"}},
-    {"WindingVolume", Base::kVolume, [](auto& r) { r.set_sign(v1::SIGN_MODE_WINDING); }, kInvalid,
+    {"WindingVolume",
+     Base::kVolume,
+     [](auto& r) { r.set_sign(v1::SIGN_MODE_WINDING); },
+     kInvalid,
      {"sign", "SIGN_MODE_WINDING"}},
-    {"MaskInsideMesh", Base::kMesh, [](auto& r) { r.set_sign(v1::SIGN_MODE_MASK_INSIDE); }, kInvalid,
+    {"MaskInsideMesh",
+     Base::kMesh,
+     [](auto& r) { r.set_sign(v1::SIGN_MODE_MASK_INSIDE); },
+     kInvalid,
      {"sign", "SIGN_MODE_MASK_INSIDE"}},
-    {"MaskInsideFullVolume", Base::kVolume,
+    {"MaskInsideFullVolume",
+     Base::kVolume,
      [](auto& r) {
        r.mutable_volume()->set_mask(std::string(16 * 16 * 16, '\1'));
        r.set_sign(v1::SIGN_MODE_MASK_INSIDE);
      },
-     kInvalid, {"sign"}},
+     kInvalid,
+     {"sign"}},
     // segment length and limits
-    {"NegativeSegmentLength", Base::kPointsOnDims, [](auto& r) { r.set_segment_length(-1); }, kInvalid,
+    {"NegativeSegmentLength",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_segment_length(-1); },
+     kInvalid,
      {"segment_length"}},
-    {"NaNSegmentLength", Base::kPointsOnDims, [](auto& r) { r.set_segment_length(kNaN); }, kInvalid,
+    {"NaNSegmentLength",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_segment_length(kNaN); },
+     kInvalid,
      {"segment_length"}},
-    {"InfiniteSegmentLength", Base::kPointsOnDims, [](auto& r) { r.set_segment_length(kInf); }, kInvalid,
+    {"InfiniteSegmentLength",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_segment_length(kInf); },
+     kInvalid,
      {"segment_length"}},
-    {"TooManySegments", Base::kPointsOnDims, [](auto& r) { r.set_segment_length(1e-6); }, kInvalid,
+    {"TooManySegments",
+     Base::kPointsOnDims,
+     [](auto& r) { r.set_segment_length(1e-6); },
+     kInvalid,
      {"segment_length", "100000"}},
     {"NegativeLimit", Base::kPointsOnDims, [](auto& r) { r.set_limit(-1); }, kInvalid, {"limit"}},
     {"MinusInfinityLimit", Base::kPointsOnDims, [](auto& r) { r.set_limit(-kInf); }, kInvalid, {"limit"}},
     {"NaNLimit", Base::kPointsOnDims, [](auto& r) { r.set_limit(kNaN); }, kInvalid, {"limit"}},
-    {"NegativeLimitVoxels", Base::kPointsOnDims, [](auto& r) { r.set_limit_voxels(-2); }, kInvalid,
-     {"limit_voxels"}},
-    {"InfiniteLimitVoxels", Base::kPointsOnDims, [](auto& r) { r.set_limit_voxels(kInf); }, kInvalid,
-     {"limit_voxels"}},
+    {"NegativeLimitVoxels", Base::kPointsOnDims, [](auto& r) { r.set_limit_voxels(-2); }, kInvalid, {"limit_voxels"}},
+    {"InfiniteLimitVoxels", Base::kPointsOnDims, [](auto& r) { r.set_limit_voxels(kInf); }, kInvalid, {"limit_voxels"}},
     {"NaNLimitVoxels", Base::kPointsOnDims, [](auto& r) { r.set_limit_voxels(kNaN); }, kInvalid, {"limit_voxels"}},
-    {"LimitAndLimitVoxels", Base::kPointsOnDims,
+    {"LimitAndLimitVoxels",
+     Base::kPointsOnDims,
      [](auto& r) {
        r.set_limit(2);
        r.set_limit_voxels(2);
      },
-     kInvalid, {"limit", "limit_voxels"}},
+     kInvalid,
+     {"limit", "limit_voxels"}},
     // grid
     {"NoGrid", Base::kPointsOnDims, [](auto& r) { r.clear_grid(); }, kInvalid, {"grid"}},
-    {"NegativeVoxelSize", Base::kPointsFitted, [](auto& r) { r.mutable_grid()->set_voxel_size(-0.5); }, kInvalid,
+    {"NegativeVoxelSize",
+     Base::kPointsFitted,
+     [](auto& r) { r.mutable_grid()->set_voxel_size(-0.5); },
+     kInvalid,
      {"grid.voxel_size"}},
-    {"NaNVoxelSize", Base::kPointsFitted, [](auto& r) { r.mutable_grid()->set_voxel_size(kNaN); }, kInvalid,
+    {"NaNVoxelSize",
+     Base::kPointsFitted,
+     [](auto& r) { r.mutable_grid()->set_voxel_size(kNaN); },
+     kInvalid,
      {"grid.voxel_size"}},
-    {"InfiniteVoxelSize", Base::kPointsOnDims, [](auto& r) { r.mutable_grid()->set_voxel_size(kInf); }, kInvalid,
+    {"InfiniteVoxelSize",
+     Base::kPointsOnDims,
+     [](auto& r) { r.mutable_grid()->set_voxel_size(kInf); },
+     kInvalid,
      {"grid.voxel_size"}},
-    {"ResolutionOne", Base::kPointsFitted,
+    {"ResolutionOne",
+     Base::kPointsFitted,
      [](auto& r) {
        r.mutable_grid()->set_voxel_size(0);
        r.mutable_grid()->set_resolution(1);
      },
-     kInvalid, {"grid.resolution", "(got 1)"}},
-    {"ResolutionTooLarge", Base::kPointsFitted,
+     kInvalid,
+     {"grid.resolution", "(got 1)"}},
+    {"ResolutionTooLarge",
+     Base::kPointsFitted,
      [](auto& r) {
        r.mutable_grid()->set_voxel_size(0);
        r.mutable_grid()->set_resolution(16385);
      },
-     kInvalid, {"grid.resolution"}},
-    {"PaddingTooLarge", Base::kPointsFitted, [](auto& r) { r.mutable_grid()->set_padding(4097); }, kInvalid,
+     kInvalid,
+     {"grid.resolution"}},
+    {"PaddingTooLarge",
+     Base::kPointsFitted,
+     [](auto& r) { r.mutable_grid()->set_padding(4097); },
+     kInvalid,
      {"grid.padding"}},
-    {"NonFiniteOrigin", Base::kPointsOnDims, [](auto& r) { setVec(r.mutable_grid()->mutable_origin(), 0, kInf, 0); },
-     kInvalid, {"grid.origin"}},
-    {"OriginWithoutDims", Base::kPointsFitted, [](auto& r) { setVec(r.mutable_grid()->mutable_origin(), 1, 1, 1); },
-     kInvalid, {"grid.origin"}},
-    {"BothVoxelSizeAndResolution", Base::kPointsFitted, [](auto& r) { r.mutable_grid()->set_resolution(16); },
-     kInvalid, {"grid", "voxel_size", "resolution"}},
-    {"NeitherVoxelSizeNorResolution", Base::kPointsFitted, [](auto& r) { r.mutable_grid()->set_voxel_size(0); },
-     kInvalid, {"grid", "voxel_size", "resolution"}},
-    {"DimsAndBox", Base::kPointsOnDims,
+    {"NonFiniteOrigin",
+     Base::kPointsOnDims,
+     [](auto& r) { setVec(r.mutable_grid()->mutable_origin(), 0, kInf, 0); },
+     kInvalid,
+     {"grid.origin"}},
+    {"OriginWithoutDims",
+     Base::kPointsFitted,
+     [](auto& r) { setVec(r.mutable_grid()->mutable_origin(), 1, 1, 1); },
+     kInvalid,
+     {"grid.origin"}},
+    {"BothVoxelSizeAndResolution",
+     Base::kPointsFitted,
+     [](auto& r) { r.mutable_grid()->set_resolution(16); },
+     kInvalid,
+     {"grid", "voxel_size", "resolution"}},
+    {"NeitherVoxelSizeNorResolution",
+     Base::kPointsFitted,
+     [](auto& r) { r.mutable_grid()->set_voxel_size(0); },
+     kInvalid,
+     {"grid", "voxel_size", "resolution"}},
+    {"DimsAndBox",
+     Base::kPointsOnDims,
      [](auto& r) {
        setVec(r.mutable_grid()->mutable_box()->mutable_min(), 0, 0, 0);
        setVec(r.mutable_grid()->mutable_box()->mutable_max(), 1, 1, 1);
      },
-     kInvalid, {"grid.box", "grid.dims"}},
-    {"DimsAndResolution", Base::kPointsOnDims, [](auto& r) { r.mutable_grid()->set_resolution(16); }, kInvalid,
+     kInvalid,
+     {"grid.box", "grid.dims"}},
+    {"DimsAndResolution",
+     Base::kPointsOnDims,
+     [](auto& r) { r.mutable_grid()->set_resolution(16); },
+     kInvalid,
      {"grid.resolution", "grid.dims"}},
-    {"DimsAndPadding", Base::kPointsOnDims, [](auto& r) { r.mutable_grid()->set_padding(2); }, kInvalid,
+    {"DimsAndPadding",
+     Base::kPointsOnDims,
+     [](auto& r) { r.mutable_grid()->set_padding(2); },
+     kInvalid,
      {"grid.padding", "grid.dims"}},
-    {"ZeroDim", Base::kPointsOnDims, [](auto& r) { r.mutable_grid()->mutable_dims()->set_y(0); }, kInvalid,
+    {"ZeroDim",
+     Base::kPointsOnDims,
+     [](auto& r) { r.mutable_grid()->mutable_dims()->set_y(0); },
+     kInvalid,
      {"grid.dims.y"}},
-    {"DimTooLarge", Base::kPointsOnDims, [](auto& r) { r.mutable_grid()->mutable_dims()->set_z(16385); }, kInvalid,
+    {"DimTooLarge",
+     Base::kPointsOnDims,
+     [](auto& r) { r.mutable_grid()->mutable_dims()->set_z(16385); },
+     kInvalid,
      {"grid.dims.z"}},
-    {"DimsWithoutVoxelSize", Base::kPointsOnDims, [](auto& r) { r.mutable_grid()->set_voxel_size(0); }, kInvalid,
+    {"DimsWithoutVoxelSize",
+     Base::kPointsOnDims,
+     [](auto& r) { r.mutable_grid()->set_voxel_size(0); },
+     kInvalid,
      {"grid.voxel_size"}},
-    {"InvertedBox", Base::kPointsFitted,
+    {"InvertedBox",
+     Base::kPointsFitted,
      [](auto& r) {
        setVec(r.mutable_grid()->mutable_box()->mutable_min(), 0, 2, 0);
        setVec(r.mutable_grid()->mutable_box()->mutable_max(), 1, 1, 1);
      },
-     kInvalid, {"grid.box"}},
-    {"NonFiniteBox", Base::kPointsFitted,
+     kInvalid,
+     {"grid.box"}},
+    {"NonFiniteBox",
+     Base::kPointsFitted,
      [](auto& r) {
        setVec(r.mutable_grid()->mutable_box()->mutable_min(), 0, 0, 0);
        setVec(r.mutable_grid()->mutable_box()->mutable_max(), kNaN, 1, 1);
      },
-     kInvalid, {"grid.box"}},
-    {"GridOverVoxelBudget", Base::kPointsOnDims, [](auto&) {}, C::kResourceExhausted, {"grid", "32768"},
+     kInvalid,
+     {"grid.box"}},
+    {"GridOverVoxelBudget",
+     Base::kPointsOnDims,
+     [](auto&) {},
+     C::kResourceExhausted,
+     {"grid", "32768"},
      [](ServerOptions& o) { o.max_voxels_per_query = 32767; }},
     // volumes
-    {"VolumeMaskSizeMismatch", Base::kVolume, [](auto& r) { r.mutable_volume()->set_mask(std::string(10, '\1')); },
-     kInvalid, {"volume"}},
-    {"VolumeZeroDim", Base::kVolume, [](auto& r) { r.mutable_volume()->mutable_dims()->set_x(0); }, kInvalid,
+    {"VolumeMaskSizeMismatch",
+     Base::kVolume,
+     [](auto& r) { r.mutable_volume()->set_mask(std::string(10, '\1')); },
+     kInvalid,
+     {"volume"}},
+    {"VolumeZeroDim",
+     Base::kVolume,
+     [](auto& r) { r.mutable_volume()->mutable_dims()->set_x(0); },
+     kInvalid,
      {"volume.dims.x"}},
-    {"VolumeWithoutSeeds", Base::kVolume,
-     [](auto& r) { r.mutable_volume()->set_mask(std::string(16 * 16 * 16, '\0')); }, kInvalid, {"volume"}},
-    {"VolumeOverVoxelBudget", Base::kVolume, [](auto&) {}, C::kResourceExhausted, {"volume.dims"},
+    {"VolumeWithoutSeeds",
+     Base::kVolume,
+     [](auto& r) { r.mutable_volume()->set_mask(std::string(16 * 16 * 16, '\0')); },
+     kInvalid,
+     {"volume"}},
+    {"VolumeOverVoxelBudget",
+     Base::kVolume,
+     [](auto&) {},
+     C::kResourceExhausted,
+     {"volume.dims"},
      [](ServerOptions& o) { o.max_voxels_per_query = 4095; }},
-    {"VolumeGridDimsMismatch", Base::kVolume, [](auto& r) { setDims(r.mutable_grid()->mutable_dims(), 16, 16, 8); },
-     kInvalid, {"grid.dims"}},
-    {"VolumeWithBox", Base::kVolume,
+    {"VolumeGridDimsMismatch",
+     Base::kVolume,
+     [](auto& r) { setDims(r.mutable_grid()->mutable_dims(), 16, 16, 8); },
+     kInvalid,
+     {"grid.dims"}},
+    {"VolumeWithBox",
+     Base::kVolume,
      [](auto& r) {
        setVec(r.mutable_grid()->mutable_box()->mutable_min(), 0, 0, 0);
        setVec(r.mutable_grid()->mutable_box()->mutable_max(), 1, 1, 1);
      },
-     kInvalid, {"grid.box"}},
-    {"VolumeWithResolution", Base::kVolume, [](auto& r) { r.mutable_grid()->set_resolution(16); }, kInvalid,
+     kInvalid,
+     {"grid.box"}},
+    {"VolumeWithResolution",
+     Base::kVolume,
+     [](auto& r) { r.mutable_grid()->set_resolution(16); },
+     kInvalid,
      {"grid.resolution"}},
-    {"VolumeTileWithoutGridDims", Base::kVolume,
+    {"VolumeTileWithoutGridDims",
+     Base::kVolume,
      [](auto& r) {
        setBox(r.mutable_tile()->mutable_window(), 0, 0, 0, 16, 16, 16);
        setBox(r.mutable_tile()->mutable_deliver(), 0, 0, 0, 16, 16, 16);
      },
-     kInvalid, {"grid.dims"}},
-    {"VolumeTileWindowDimsMismatch", Base::kVolume,
+     kInvalid,
+     {"grid.dims"}},
+    {"VolumeTileWindowDimsMismatch",
+     Base::kVolume,
      [](auto& r) {
        setDims(r.mutable_grid()->mutable_dims(), 32, 32, 32);
        setBox(r.mutable_tile()->mutable_window(), 0, 0, 0, 16, 16, 8);
        setBox(r.mutable_tile()->mutable_deliver(), 0, 0, 0, 8, 8, 8);
      },
-     kInvalid, {"volume", "16x16x8"}},
+     kInvalid,
+     {"volume", "16x16x8"}},
     // tiles (32³ grid)
-    {"TileWindowMinNotBrickAligned", Base::kPointsOnDims,
+    {"TileWindowMinNotBrickAligned",
+     Base::kPointsOnDims,
      [](auto& r) {
        setBox(r.mutable_tile()->mutable_window(), 3, 0, 0, 13, 16, 16);
        setBox(r.mutable_tile()->mutable_deliver(), 8, 0, 0, 8, 8, 8);
      },
-     kInvalid, {"tile.window.min_x"}},
-    {"TileWindowEmpty", Base::kPointsOnDims,
+     kInvalid,
+     {"tile.window.min_x"}},
+    {"TileWindowEmpty",
+     Base::kPointsOnDims,
      [](auto& r) {
        setBox(r.mutable_tile()->mutable_window(), 0, 0, 0, 16, 0, 16);
        setBox(r.mutable_tile()->mutable_deliver(), 0, 0, 0, 8, 8, 8);
      },
-     kInvalid, {"tile.window", "size_y"}},
-    {"TileWindowBeyondGrid", Base::kPointsOnDims,
+     kInvalid,
+     {"tile.window", "size_y"}},
+    {"TileWindowBeyondGrid",
+     Base::kPointsOnDims,
      [](auto& r) {
        setBox(r.mutable_tile()->mutable_window(), 0, 0, 24, 16, 16, 16);
        setBox(r.mutable_tile()->mutable_deliver(), 0, 0, 24, 8, 8, 8);
      },
-     kInvalid, {"tile.window", "size_z"}},
-    {"TileWindowEndNotBrickAligned", Base::kPointsOnDims,
+     kInvalid,
+     {"tile.window", "size_z"}},
+    {"TileWindowEndNotBrickAligned",
+     Base::kPointsOnDims,
      [](auto& r) {
        setBox(r.mutable_tile()->mutable_window(), 0, 0, 0, 16, 12, 16);
        setBox(r.mutable_tile()->mutable_deliver(), 0, 0, 0, 8, 8, 8);
      },
-     kInvalid, {"tile.window", "size_y"}},
-    {"TileDeliverNotBrickAligned", Base::kPointsOnDims,
+     kInvalid,
+     {"tile.window", "size_y"}},
+    {"TileDeliverNotBrickAligned",
+     Base::kPointsOnDims,
      [](auto& r) {
        setBox(r.mutable_tile()->mutable_window(), 0, 0, 0, 16, 16, 16);
        setBox(r.mutable_tile()->mutable_deliver(), 0, 4, 0, 8, 4, 8);
      },
-     kInvalid, {"tile.deliver.min_y"}},
-    {"TileDeliverOutsideWindow", Base::kPointsOnDims,
+     kInvalid,
+     {"tile.deliver.min_y"}},
+    {"TileDeliverOutsideWindow",
+     Base::kPointsOnDims,
      [](auto& r) {
        setBox(r.mutable_tile()->mutable_window(), 0, 0, 0, 16, 16, 16);
        setBox(r.mutable_tile()->mutable_deliver(), 16, 0, 0, 8, 8, 8);
      },
-     kInvalid, {"tile.deliver", "tile.window"}},
-    {"TileWindowOverVoxelBudget", Base::kPointsOnDims,
+     kInvalid,
+     {"tile.deliver", "tile.window"}},
+    // anisotropic grids and label volumes
+    {"SpacingNegative",
+     Base::kVolume,
+     [](auto& r) { setVec(r.mutable_grid()->mutable_spacing(), 1, -1, 1); },
+     kInvalid,
+     {"grid.spacing"}},
+    {"SpacingNaN",
+     Base::kPointsOnDims,
+     [](auto& r) {
+       r.mutable_grid()->clear_voxel_size();
+       setVec(r.mutable_grid()->mutable_spacing(), 1, kNaN, 1);
+     },
+     kInvalid,
+     {"grid.spacing"}},
+    {"SpacingWithVoxelSize",
+     Base::kPointsOnDims,
+     [](auto& r) { setVec(r.mutable_grid()->mutable_spacing(), 1, 1, 2); },
+     kInvalid,
+     {"grid.spacing", "voxel_size"}},
+    {"SpacingTooFarApart",
+     Base::kVolume,
+     [](auto& r) { setVec(r.mutable_grid()->mutable_spacing(), 1, 1, 5000); },
+     kInvalid,
+     {"grid.spacing"}},
+    {"SpacingAroundTheSeeds",
+     Base::kPointsFitted,
+     [](auto& r) {
+       r.mutable_grid()->clear_voxel_size();
+       setVec(r.mutable_grid()->mutable_spacing(), 1, 1, 2);
+     },
+     kInvalid,
+     {"grid.spacing"}},
+    {"LabelsOnPoints", Base::kPointsOnDims, [](auto& r) { r.set_labels(true); }, kInvalid, {"labels", "volume"}},
+    {"NearestLabelOnAMesh", Base::kMesh, [](auto& r) { r.set_nearest_label(true); }, kInvalid, {"nearest_label"}},
+    {"BlackBorderWithoutLabels",
+     Base::kVolume,
+     [](auto& r) { r.set_black_border(true); },
+     kInvalid,
+     {"black_border", "labels"}},
+    {"LabelsWithClosestFeature",
+     Base::kVolume,
+     [](auto& r) {
+       r.set_labels(true);
+       r.set_closest_feature(true);
+     },
+     kInvalid,
+     {"labels", "closest_feature"}},
+    {"NearestLabelWithClosestFeature",
+     Base::kVolume,
+     [](auto& r) {
+       r.set_nearest_label(true);
+       r.set_closest_feature(true);
+     },
+     kInvalid,
+     {"nearest_label", "closest_feature"}},
+    {"LabelsSigned",
+     Base::kVolume,
+     [](auto& r) {
+       r.set_labels(true);
+       r.set_sign(v1::SIGN_MODE_MASK_INSIDE);
+     },
+     kInvalid,
+     {"labels", "unsigned"}},
+    {"LabelsOnTheBand",
+     Base::kVolume,
+     [](auto& r) {
+       r.set_labels(true);
+       r.set_algorithm(v1::ALGORITHM_BAND);
+     },
+     kInvalid,
+     {"labels"}},
+    {"TileWindowOverVoxelBudget",
+     Base::kPointsOnDims,
      [](auto& r) {
        setBox(r.mutable_tile()->mutable_window(), 0, 0, 0, 32, 32, 8);
        setBox(r.mutable_tile()->mutable_deliver(), 0, 0, 0, 8, 8, 8);
      },
-     C::kResourceExhausted, {"tile.window", "8192"}, [](ServerOptions& o) { o.max_voxels_per_query = 5000; }},
+     C::kResourceExhausted,
+     {"tile.window", "8192"},
+     [](ServerOptions& o) { o.max_voxels_per_query = 5000; }},
 };
 
 class ResolveQueryRuleTest : public ResolveQueryTest, public ::testing::WithParamInterface<RuleCase> {};
@@ -371,6 +589,34 @@ INSTANTIATE_TEST_SUITE_P(Rules, ResolveQueryRuleTest, ::testing::ValuesIn(kRules
 
 // ---------------------------------------------------------------------------------------------------------------
 // Seeds
+
+TEST_F(ResolveQueryTest, AnisotropicLabelVolumeIsResolvedAndItsHeaderSaysSo) {
+  v1::QueryRequest r = inlineVolume();
+  setVec(r.mutable_grid()->mutable_spacing(), 0.5, 0.5, 2.5);
+  setVec(r.mutable_grid()->mutable_origin(), 10, -20, 30);
+  r.set_labels(true);
+  r.set_black_border(true);
+  const ResolvedQuery q = resolveOk(r);
+  EXPECT_EQ(q.grid.spacing(), (Vec3d{0.5, 0.5, 2.5}));
+  EXPECT_EQ(q.grid.voxelSize(), 0.5);
+  EXPECT_TRUE(q.plan.labels && q.plan.black_border);
+  EXPECT_EQ(q.plan.algorithm, FieldAlgorithm::kSeparable);
+  v1::QueryHeader h;
+  fillQueryHeader(q, "q", &h);
+  EXPECT_EQ(h.spacing().z(), 2.5);
+  EXPECT_EQ(h.voxel_size(), 0.5);
+  EXPECT_TRUE(h.labels() && h.black_border());
+  EXPECT_EQ(h.label_type(), v1::VOXEL_TYPE_UINT8);
+  EXPECT_EQ(h.closest_feature(), v1::CLOSEST_FEATURE_NONE);
+
+  v1::QueryRequest n = inlineVolume();
+  n.set_nearest_label(true);
+  const ResolvedQuery qn = resolveOk(n);
+  EXPECT_TRUE(qn.plan.nearest_label);
+  fillQueryHeader(qn, "n", &h);
+  EXPECT_EQ(h.closest_feature(), v1::CLOSEST_FEATURE_LABEL);
+  EXPECT_FALSE(h.labels());
+}
 
 TEST_F(ResolveQueryTest, PointsAreResolvedInWorldCoordinates) {
   const ResolvedQuery q = resolveOk(pointsOnDims());
@@ -408,7 +654,7 @@ TEST_F(ResolveQueryTest, CachedVolumeByAssetId) {
   v1::Dims dims;
   setDims(&dims, 16, 16, 16);
   std::shared_ptr<const Asset> asset;
-  ASSERT_TRUE(parseVolumeAsset(dims, blockMask(), "block", "volume", options.max_voxels_per_query, nullptr, &asset).ok());
+  ASSERT_TRUE(parseVolumeAsset(dims, v1::VOXEL_TYPE_UINT8, blockMask(), "block", "volume", options.max_voxels_per_query, nullptr, &asset).ok());
   ASSERT_TRUE(cache.insert(asset));
   v1::QueryRequest r;
   r.set_asset_id(asset->id);

@@ -11,7 +11,7 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // 1-D squared distance transform of f (n samples, stride apart in `data`), in place. Infinite samples never
 // join the lower envelope, so an all-infinite line stays infinite and no inf - inf arithmetic occurs.
-void transformLine(double* data, int n, long stride, std::vector<double>& f, std::vector<int>& v,
+void transformLine(double* data, int n, long stride, double w2, std::vector<double>& f, std::vector<int>& v,
                    std::vector<double>& z) {
   for (int q = 0; q < n; ++q) f[q] = data[q * stride];
   int k = -1;
@@ -27,7 +27,7 @@ void transformLine(double* data, int n, long stride, std::vector<double>& f, std
     double s;
     for (;;) {
       const int p = v[k];
-      s = ((f[q] + double(q) * q) - (f[p] + double(p) * p)) / (2.0 * (q - p));
+      s = ((f[q] + w2 * double(q) * q) - (f[p] + w2 * double(p) * p)) / (2.0 * w2 * (q - p));
       if (s > z[k]) break;
       --k;  // z[0] = -inf, so k never drops below 0 here
     }
@@ -41,13 +41,23 @@ void transformLine(double* data, int n, long stride, std::vector<double>& f, std
   for (int q = 0; q < n; ++q) {
     while (z[k + 1] < q) ++k;
     const double d = q - v[k];
-    data[q * stride] = d * d + f[v[k]];
+    data[q * stride] = w2 * d * d + f[v[k]];
   }
 }
 
 }  // namespace
 
 std::vector<double> edtSqr(int nx, int ny, int nz, const std::vector<uint8_t>& mask) {
+  const double unit[3] = {1, 1, 1};
+  return edtSqr(nx, ny, nz, mask, unit);
+}
+
+std::vector<double> signedEdt(int nx, int ny, int nz, const std::vector<uint8_t>& mask) {
+  const double unit[3] = {1, 1, 1};
+  return signedEdt(nx, ny, nz, mask, unit);
+}
+
+std::vector<double> edtSqr(int nx, int ny, int nz, const std::vector<uint8_t>& mask, const double spacing[3]) {
   const size_t n = static_cast<size_t>(nx) * ny * nz;
   std::vector<double> d(n);
   for (size_t i = 0; i < n; ++i) d[i] = mask[i] ? 0.0 : kInf;
@@ -56,19 +66,19 @@ std::vector<double> edtSqr(int nx, int ny, int nz, const std::vector<uint8_t>& m
   std::vector<int> v(m);
   const long sx = 1, sy = nx, sz = long(nx) * ny;
   for (int z_ = 0; z_ < nz; ++z_)
-    for (int y = 0; y < ny; ++y) transformLine(&d[z_ * sz + y * sy], nx, sx, f, v, z);
+    for (int y = 0; y < ny; ++y) transformLine(&d[z_ * sz + y * sy], nx, sx, spacing[0] * spacing[0], f, v, z);
   for (int z_ = 0; z_ < nz; ++z_)
-    for (int x = 0; x < nx; ++x) transformLine(&d[z_ * sz + x], ny, sy, f, v, z);
+    for (int x = 0; x < nx; ++x) transformLine(&d[z_ * sz + x], ny, sy, spacing[1] * spacing[1], f, v, z);
   for (int y = 0; y < ny; ++y)
-    for (int x = 0; x < nx; ++x) transformLine(&d[y * sy + x], nz, sz, f, v, z);
+    for (int x = 0; x < nx; ++x) transformLine(&d[y * sy + x], nz, sz, spacing[2] * spacing[2], f, v, z);
   return d;
 }
 
-std::vector<double> signedEdt(int nx, int ny, int nz, const std::vector<uint8_t>& mask) {
+std::vector<double> signedEdt(int nx, int ny, int nz, const std::vector<uint8_t>& mask, const double spacing[3]) {
   std::vector<uint8_t> inverse(mask.size());
   for (size_t i = 0; i < mask.size(); ++i) inverse[i] = mask[i] == 0;
-  const std::vector<double> outside = edtSqr(nx, ny, nz, mask);     // distance to the nearest mask voxel
-  const std::vector<double> inside = edtSqr(nx, ny, nz, inverse);   // distance to the nearest non-mask voxel
+  const std::vector<double> outside = edtSqr(nx, ny, nz, mask, spacing);    // distance to the nearest mask voxel
+  const std::vector<double> inside = edtSqr(nx, ny, nz, inverse, spacing);  // to the nearest non-mask voxel
   std::vector<double> out(mask.size());
   for (size_t i = 0; i < mask.size(); ++i) out[i] = std::sqrt(outside[i]) - std::sqrt(inside[i]);
   return out;

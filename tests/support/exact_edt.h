@@ -18,4 +18,9 @@ std::vector<double> edtSqr(int nx, int ny, int nz, const std::vector<uint8_t>& m
 
 std::vector<double> signedEdt(int nx, int ny, int nz, const std::vector<uint8_t>& mask);
 
+/// The same with voxels of `spacing` (x, y, z) world units: distances in world units (scipy's `sampling`), squared
+/// for edtSqr. Exact up to double rounding.
+std::vector<double> edtSqr(int nx, int ny, int nz, const std::vector<uint8_t>& mask, const double spacing[3]);
+std::vector<double> signedEdt(int nx, int ny, int nz, const std::vector<uint8_t>& mask, const double spacing[3]);
+
 }  // namespace distband::oracle

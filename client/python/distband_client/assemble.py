@@ -42,11 +42,14 @@ class FieldAssembler:
                 self.closest_dtype = np.dtype("<i4")
             elif header.closest_feature == pb.CLOSEST_FEATURE_VOXEL:
                 self.closest_dtype = np.dtype("<i8")
+            elif header.closest_feature == pb.CLOSEST_FEATURE_LABEL:
+                self.closest_dtype = np.dtype("<u4")  # nearest labels, held as int64 (-1: not delivered)
             else:
                 raise DistbandError(
                     "UNIMPLEMENTED", "closest=True, but the server's header reports no closest feature "
                     f"(QueryHeader.closest_feature = {header.closest_feature}): the server predates closest features")
-            self.closest = np.full(self.shape, -1, dtype=self.closest_dtype.newbyteorder("="))
+            held = np.dtype(np.int64) if self.closest_dtype.kind == "u" else self.closest_dtype.newbyteorder("=")
+            self.closest = np.full(self.shape, -1, dtype=held)
 
     def add(self, batch):
         """Places one BrickBatch; returns the number of voxels it delivered."""

@@ -25,9 +25,9 @@ def _enum_name(enum, value, prefix):
 @dataclasses.dataclass(frozen=True)
 class Header:
     """The grid and settings the server used (QueryHeader). Voxel (i, j, k) = field[k, j, i] sits at world
-    position origin + voxel_size * (i, j, k)."""
+    position origin + spacing * (i, j, k), axis by axis."""
     origin: tuple           # (x, y, z) world position of voxel (0, 0, 0)
-    voxel_size: float       # world units per voxel
+    voxel_size: float       # world units per voxel (the smallest spacing on an anisotropic grid)
     dims: tuple             # (x, y, z) voxels
     shape: tuple            # (Z, Y, X): the returned arrays' shape
     limit: float            # distance limit in world units (+inf without one); undelivered voxels hold +-limit
@@ -40,7 +40,7 @@ class Header:
     mode: str
     encoding: str           # 'float32' or 'float16' (values are returned as float32 either way)
     segment_length: float
-    closest_feature: str    # 'none', 'triangle', 'point' or 'voxel'
+    closest_feature: str    # 'none', 'triangle', 'point', 'voxel' or 'label'
     expected_voxels: int    # the server's estimate of the voxels it will deliver; 0 = unknown
     query_id: str
     # How the field was computed (QueryHeader.algorithm; core's algorithmDescription says the same): "band", the
@@ -50,6 +50,9 @@ class Header:
     # over the bricks within the limit of the boundary for a limited seed volume; its first segment comes once that
     # whole field (or those bricks) is known.
     algorithm: str
+    spacing: tuple = ()     # (x, y, z) voxel size per axis (the wire's order; numpy's is reversed)
+    labels: bool = False    # the multi-label EDT
+    black_border: bool = False
 
     @classmethod
     def from_proto(cls, h):
@@ -62,7 +65,9 @@ class Header:
                    encoding=_enum_name(pb.BrickEncoding, h.encoding, "BRICK_ENCODING_"),
                    segment_length=h.segment_length,
                    closest_feature=_enum_name(pb.ClosestFeature, h.closest_feature, "CLOSEST_FEATURE_"),
-                   expected_voxels=h.expected_voxels, query_id=h.query_id, algorithm=h.algorithm)
+                   expected_voxels=h.expected_voxels, query_id=h.query_id, algorithm=h.algorithm,
+                   spacing=(h.spacing.x, h.spacing.y, h.spacing.z) if h.HasField("spacing") else (h.voxel_size,) * 3,
+                   labels=h.labels, black_border=h.black_border)
 
 
 @dataclasses.dataclass
@@ -102,19 +107,21 @@ def _channel(server, root_certificates):
 def query_result(server, *, mesh=None, points=None, volume=None, resolution=None, voxel_size=None, dims=None,
                  origin=None, padding=None, limit=None, limit_voxels=None, sign=None, mode=None, stencil=None,
                  segment_length=None, encoding=None, closest=False, progress=None, token=None,
-                 root_certificates=None, timeout=None):
+                 root_certificates=None, timeout=None, spacing=None, labels=False, black_border=False,
+                 nearest_label=False):
     """Like query(), but returns a Result with the field, the closest features, the header and the summary."""
     request = build_request(mesh=mesh, points=points, volume=volume, resolution=resolution, voxel_size=voxel_size,
                             dims=dims, origin=origin, padding=padding, limit=limit, limit_voxels=limit_voxels,
                             sign=sign, mode=mode, stencil=stencil, segment_length=segment_length,
-                            encoding=encoding, closest=closest)
+                            encoding=encoding, closest=closest, spacing=spacing, labels=labels,
+                            black_border=black_border, nearest_label=nearest_label)
     _check_connection_args(token, root_certificates, timeout, progress)
     metadata = [("authorization", f"Bearer {token}")] if token is not None else None
 
     with _channel(server, root_certificates) as channel:
         call = rpc.DistanceFieldStub(channel).Query(request, metadata=metadata, timeout=timeout)
         try:
-            return _read_stream(call, closest, progress)
+            return _read_stream(call, closest or nearest_label, progress)
         except grpc.RpcError as e:
             raise DistbandError(e.code().name, e.details()) from None
         finally:
@@ -160,23 +167,28 @@ def _read_stream(call, want_closest, progress):
 
 def query(server, *, mesh=None, points=None, volume=None, resolution=None, voxel_size=None, dims=None, origin=None,
           padding=None, limit=None, limit_voxels=None, sign=None, mode=None, stencil=None, segment_length=None,
-          encoding=None, closest=False, progress=None, token=None, root_certificates=None, timeout=None):
+          encoding=None, closest=False, progress=None, token=None, root_certificates=None, timeout=None,
+          spacing=None, labels=False, black_border=False, nearest_label=False):
     """Computes a distance field on a distband server and returns it as a float32 numpy array (Z, Y, X).
 
     Exactly one seed source: ``mesh`` (path to .obj/.off/.ply/.stl), ``points`` ((x, y, z) world coordinates) or
-    ``volume`` (bool/uint8 array (Z, Y, X), nonzero = seed). The grid: ``resolution`` or ``voxel_size`` around the
+    ``volume`` (bool/uint8/uint16/uint32 array (Z, Y, X), nonzero = seed; its values are labels). The grid: ``resolution`` or ``voxel_size`` around the
     seeds (``padding`` voxels of margin), or ``dims`` (x, y, z) + ``voxel_size`` (+ ``origin``); a volume's own
     shape by default. Voxels beyond ``limit`` (world units) or ``limit_voxels`` hold +limit (-limit inside a signed
     field), as in the CLI's .npy. With ``closest=True`` returns ``(field, closest)``: the index of each voxel's
     closest triangle / point (int32) or seed voxel (int64, linear in (Z, Y, X)), -1 where not delivered.
     ``progress(voxels_done, expected_voxels, segment)`` is called after each brick batch (expected_voxels 0 =
     unknown). ``token`` is sent as 'authorization: Bearer <token>'; ``root_certificates`` (PEM bytes) turns on TLS;
-    ``timeout`` is the call's deadline in seconds. Raises ValueError/TypeError for bad arguments (before
+    ``timeout`` is the call's deadline in seconds. Volumes: ``spacing`` is the voxel size per axis in the array's
+    order (Z, Y, X), as scipy's ``sampling``; ``labels=True`` computes the multi-label EDT (seung-lab edt's
+    ``edt::edt``; ``black_border=True``: outside the grid is label 0); ``nearest_label=True`` returns
+    ``(field, labels)``, each voxel's nearest seed label (int64, -1 where not delivered). Raises ValueError/TypeError for bad arguments (before
     connecting) and DistbandError for everything the server or the network reports. query_result() also returns
     the header (grid, limit, sign mode) and the summary.
     """
     r = query_result(server, mesh=mesh, points=points, volume=volume, resolution=resolution, voxel_size=voxel_size,
                      dims=dims, origin=origin, padding=padding, limit=limit, limit_voxels=limit_voxels, sign=sign,
                      mode=mode, stencil=stencil, segment_length=segment_length, encoding=encoding, closest=closest,
-                     progress=progress, token=token, root_certificates=root_certificates, timeout=timeout)
-    return (r.field, r.closest) if closest else r.field
+                     progress=progress, token=token, root_certificates=root_certificates, timeout=timeout,
+                     spacing=spacing, labels=labels, black_border=black_border, nearest_label=nearest_label)
+    return (r.field, r.closest) if closest or nearest_label else r.field

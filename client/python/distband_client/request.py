@@ -97,21 +97,27 @@ def _points(points):
     return pb.PointList(points=[pb.Vec3(x=x, y=y, z=z) for x, y, z in arr.tolist()])
 
 
+_VOXEL_TYPES = {np.dtype(np.bool_): pb.VOXEL_TYPE_UINT8, np.dtype(np.uint8): pb.VOXEL_TYPE_UINT8,
+                np.dtype(np.uint16): pb.VOXEL_TYPE_UINT16, np.dtype(np.uint32): pb.VOXEL_TYPE_UINT32}
+
+
 def _volume(volume):
     if not isinstance(volume, np.ndarray):
-        raise TypeError(f"volume must be a numpy array of bool or uint8 (got {type(volume).__name__})")
-    if volume.dtype not in (np.bool_, np.uint8):
-        raise TypeError(f"volume must have dtype bool or uint8 (got {volume.dtype})")
+        raise TypeError(f"volume must be a numpy array of bool, uint8, uint16 or uint32 (got {type(volume).__name__})")
+    if volume.dtype not in _VOXEL_TYPES:
+        raise TypeError(f"volume must have dtype bool, uint8, uint16 or uint32 (got {volume.dtype})")
     if volume.ndim != 3:
         raise ValueError(f"volume must be 3-D, shape (Z, Y, X) (got shape {volume.shape})")
     z, y, x = volume.shape
-    # The wire mask is x fastest = C order of a (Z, Y, X) array; bool and uint8 share the byte layout.
-    mask = np.ascontiguousarray(volume).view(np.uint8).tobytes()
-    return pb.InlineVolume(dims=pb.Dims(x=x, y=y, z=z), mask=mask)
+    # The wire mask is x fastest = C order of a (Z, Y, X) array, little-endian elements.
+    data = np.ascontiguousarray(volume).view(np.uint8) if volume.dtype == np.bool_ else \
+        np.ascontiguousarray(volume, dtype=volume.dtype.newbyteorder("<"))
+    return pb.InlineVolume(dims=pb.Dims(x=x, y=y, z=z), mask=data.tobytes(), element_type=_VOXEL_TYPES[volume.dtype])
 
 
 def build_request(*, mesh, points, volume, resolution, voxel_size, dims, origin, padding, limit, limit_voxels,
-                  sign, mode, stencil, segment_length, encoding, closest):
+                  sign, mode, stencil, segment_length, encoding, closest, spacing=None, labels=False,
+                  black_border=False, nearest_label=False):
     """The QueryRequest for query()'s arguments; raises ValueError/TypeError naming the first bad argument."""
     given = [name for name, v in (("mesh", mesh), ("points", points), ("volume", volume)) if v is not None]
     if len(given) != 1:
@@ -123,6 +129,22 @@ def build_request(*, mesh, points, volume, resolution, voxel_size, dims, origin,
     padding = _integer("padding", padding, minimum=0)
     grid_dims = None if dims is None else _triple("dims", dims, lambda n, v: _integer(n, v, minimum=1))
     grid_origin = None if origin is None else _triple("origin", origin, _number)
+    # spacing: in the array's axis order (Z, Y, X), as scipy's `sampling`; the wire's is (x, y, z).
+    grid_spacing = None if spacing is None else _triple("spacing", spacing,
+                                                         lambda n, v: _number(n, v, positive=True))[::-1]
+    if grid_spacing is not None and voxel_size is not None:
+        raise ValueError("spacing and voxel_size are exclusive (voxel_size v means spacing (v, v, v))")
+    if grid_spacing is not None and grid_dims is None and volume is None:
+        raise ValueError("spacing applies to dims or a volume (around the seeds give voxel_size or resolution)")
+    for name, flag in (("labels", labels), ("black_border", black_border), ("nearest_label", nearest_label)):
+        if not isinstance(flag, bool):
+            raise TypeError(f"{name} must be True or False (got {type(flag).__name__})")
+        if flag and volume is None:
+            raise ValueError(f"{name} applies to volume seeds (volume=)")
+    if black_border and not labels:
+        raise ValueError("black_border applies with labels=True (the multi-label EDT)")
+    if nearest_label and (labels or closest):
+        raise ValueError("nearest_label excludes labels and closest (one closest feature per voxel)")
     # The three ways of GridSpec (see the proto): explicit dims (volumes imply them), or a box grown by padding
     # around the seeds, sized by exactly one of resolution and voxel_size.
     if grid_dims is not None or volume is not None:
@@ -130,8 +152,8 @@ def build_request(*, mesh, points, volume, resolution, voxel_size, dims, origin,
             raise ValueError("resolution cannot be combined with dims or a volume (give voxel_size)")
         if padding is not None:
             raise ValueError("padding cannot be combined with dims or a volume")
-        if volume is None and voxel_size is None:
-            raise ValueError("dims needs voxel_size")
+        if volume is None and voxel_size is None and spacing is None:
+            raise ValueError("dims needs voxel_size or spacing")
     else:
         if origin is not None:
             raise ValueError("origin is only used with dims or a volume (otherwise the seeds' bounds give it)")
@@ -165,6 +187,8 @@ def build_request(*, mesh, points, volume, resolution, voxel_size, dims, origin,
         g.dims.CopyFrom(pb.Dims(x=grid_dims[0], y=grid_dims[1], z=grid_dims[2]))
     if grid_origin is not None:
         g.origin.CopyFrom(pb.Vec3(x=grid_origin[0], y=grid_origin[1], z=grid_origin[2]))
+    if grid_spacing is not None:
+        g.spacing.CopyFrom(pb.Vec3(x=grid_spacing[0], y=grid_spacing[1], z=grid_spacing[2]))
     for field, value in (("stencil", _choice("stencil", stencil, _STENCILS)),
                          ("mode", _choice("mode", mode, _MODES)),
                          ("sign", _choice("sign", sign, _SIGNS)),
@@ -173,4 +197,7 @@ def build_request(*, mesh, points, volume, resolution, voxel_size, dims, origin,
         if value is not None:
             setattr(request, field, value)
     request.closest_feature = closest
+    request.labels = labels
+    request.black_border = black_border
+    request.nearest_label = nearest_label
     return request

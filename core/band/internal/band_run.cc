@@ -71,9 +71,10 @@ FieldRunResult BandRun::run() {
     double slice_upper = bucket_vox > 0 ? std::min(upper, lower + bucket_vox) : upper;
     auto admitUpTo = [&](double u) {
       // A slice whose admission would reach the limit's is the limit's: nothing beyond it is held back.
-      const double limit_admit = s.limit_vox + kLimitSlackVoxels;
-      const bool at_limit = u >= s.limit_vox || u + kAdmitSlackVoxels >= limit_admit;
-      const double admit = at_limit ? limit_admit : u + kAdmitSlackVoxels;
+      const double limit_admit = s.limit_vox + kLimitSlackVoxels * s.slack_scale;
+      const double admit_slack = kAdmitSlackVoxels * s.slack_scale;
+      const bool at_limit = u >= s.limit_vox || u + admit_slack >= limit_admit;
+      const double admit = at_limit ? limit_admit : u + admit_slack;
       s.admit2 = std::isfinite(admit) ? float(admit * admit) : INFINITY;
       s.defer = !at_limit;
       if (at_limit) slice_upper = upper;

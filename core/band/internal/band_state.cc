@@ -18,16 +18,17 @@ BandState::BandState(const Grid& g, const Seeds& s, const BandOptions& o)
     : grid(g),
       seeds(s),
       opt(o),
-      stencil(Stencil::get(o.stencil.value_or(defaultStencil(s.kind)))),
-      metric{s},
+      stencil(Stencil::get(o.stencil.value_or(defaultStencil(s.kind, g.cubic())))),
+      metric{s, g.axisScale(), !g.cubic()},
       dims(g.dims()),
       region(s.region ? s.region->data() : nullptr),
-      links(stencil),
+      links(stencil, g.axisScale()),
       lifespan(o, stencil),
       table(g.brickDims(), lifespan.enabled) {
   const double h = g.voxelSize();
   limit_vox = o.limit_world / h;
   segment_vox = o.segment_length_world / h;
+  slack_scale = g.maxAxisScale();
 }
 
 }  // namespace distband::band_internal

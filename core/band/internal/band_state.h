@@ -81,18 +81,28 @@ struct ThreadBuffers {
 
 struct SiteMetric {
   const Seeds& seeds;
-  // Squared distance in voxels from voxel (x,y,z) to a site (key form), in double (the emitted value) ...
-  double dist2(uint32_t site, double x, double y, double z) const {
+  Vec3d scale{1, 1, 1};  // Grid::axisScale
+  bool scaled = false;   // an anisotropic grid (on a cubic one unit space is index space)
+  /// Voxel c of the engine's grid in the sites' unit space. Sites live in the space of the grid this one is a window
+  /// of; integer offsets add exactly, so a tile computes the same doubles as the whole grid would. Hot loops take
+  /// kScaled from `scaled` once, outside the loop.
+  template <bool kScaled>
+  [[gnu::always_inline]] Vec3d unitsOf(const Coord& c) const {
+    const Coord o{c.x + seeds.site_offset.x, c.y + seeds.site_offset.y, c.z + seeds.site_offset.z};
+    const Vec3d p{double(o.x), double(o.y), double(o.z)};
+    if constexpr (kScaled) return {p.x * scale.x, p.y * scale.y, p.z * scale.z};
+    return p;
+  }
+  Vec3d unitsOf(const Coord& c) const { return scaled ? unitsOf<true>(c) : unitsOf<false>(c); }
+  // Squared distance in voxels from the unit-space point p to a site (key form), in double (the emitted value) ...
+  [[gnu::always_inline]] double dist2(uint32_t site, const Vec3d& p) const {
     if (site == kNoSiteKey) return 0.0;
-    // Sites live in the index space of the grid this one is a window of; integer offsets add exactly, so a tile
-    // computes the same doubles as the whole grid would.
-    const Vec3d p{x + seeds.site_offset.x, y + seeds.site_offset.y, z + seeds.site_offset.z};
     if (seeds.kind == SiteKind::kPoint) return (p - seeds.points[site]).lengthSqr();
     const auto& t = seeds.triangles[site];
     return TriangleDistance(t[0], t[1], t[2]).dist2(p);
   }
   // ... and rounded to float for the key.
-  float key2(uint32_t site, double x, double y, double z) const { return float(dist2(site, x, y, z)); }
+  [[gnu::always_inline]] float key2(uint32_t site, const Vec3d& p) const { return float(dist2(site, p)); }
 };
 
 /// Paper mode's lifespan settings (disabled in exact mode, or with alpha = +infinity).
@@ -146,6 +156,9 @@ struct BandState {
   Lifespan lifespan;
   BrickTable table;
   double limit_vox = 0, segment_vox = 0;
+  // The slacks' factor: a lattice path runs up to a voxel step off its straight line, and a step along an axis is
+  // up to Grid::maxAxisScale() units long (1 on a cubic grid).
+  double slack_scale = 1;
 
   // The current segment (set by the run loop between phases).
   int step = 0;

@@ -140,9 +140,11 @@ bool emitSegment(BandState& s, const SegmentCallback& cb, int index, double lowe
 int64_t closestFeature(const BandState& s, uint32_t site, const Coord& voxel) {
   if (s.seeds.feature_kind == Seeds::FeatureKind::kSiteVoxel) {
     if (site == kNoSite) return s.grid.denseIndex(voxel);  // inside the seed volume: its own feature
-    const Vec3d& p = s.seeds.points[site];
+    const Vec3d& p = s.seeds.points[site];  // a voxel's centre in unit space
     const Coord o = s.seeds.site_offset;
-    return s.grid.denseIndex({int(std::lround(p.x)) - o.x, int(std::lround(p.y)) - o.y, int(std::lround(p.z)) - o.z});
+    const Vec3d& r = s.metric.scale;
+    return s.grid.denseIndex({int(std::lround(p.x / r.x)) - o.x, int(std::lround(p.y / r.y)) - o.y,
+                              int(std::lround(p.z / r.z)) - o.z});
   }
   if (site == kNoSite) return -1;
   return s.seeds.site_feature.empty() ? int64_t(site) : int64_t(s.seeds.site_feature[site]);
@@ -153,7 +155,9 @@ void buildChunk(BandState& s, size_t c0, size_t c1, const std::vector<uint32_t>&
   const double h = s.grid.voxelSize();
   const bool triangles = s.seeds.kind == SiteKind::kTriangle;
   const bool closest = s.opt.closest_features;
-  tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 16), [&](const tbb::blocked_range<size_t>& r) {
+  // Compiled for cubic and anisotropic grids (a point site's distance takes the voxel's unit-space position).
+  auto fill = [&](const tbb::blocked_range<size_t>& r, auto scaled_tag) {
+    constexpr bool kScaled = decltype(scaled_tag)::value;
     uint32_t sites[kBrickVoxels];
     for (size_t i = r.begin(); i != r.end(); ++i) {
       if (s.stopping()) return;  // per brick: a mesh's winding-number sign can take milliseconds a brick
@@ -174,7 +178,7 @@ void buildChunk(BandState& s, size_t c0, size_t c1, const std::vector<uint32_t>&
         sites[off] = site == kNoSiteKey ? kNoSite : site;
         // Triangle sites: the key's float squared distance is the exact one rounded to 24 bits, so its root is within
         // an ulp of the output's float (a second point–triangle test per voxel would buy nothing). Points are cheap.
-        const double d2 = triangles ? double(keyDist2(k)) : s.metric.dist2(site, c.x, c.y, c.z);
+        const double d2 = triangles ? double(keyDist2(k)) : s.metric.dist2(site, s.metric.unitsOf<kScaled>(c));
         brick.values[off] = float(std::sqrt(d2) * h);
         brick.mask.set(off);
         if (closest) brick.closest[off] = closestFeature(s, sites[off], c);
@@ -183,6 +187,9 @@ void buildChunk(BandState& s, size_t c0, size_t c1, const std::vector<uint32_t>&
         b->emitted.words[w].fetch_or(brick.mask.words[w], std::memory_order_relaxed);
       if (s.seeds.sign) s.seeds.sign(brick, sites);
     }
+  };
+  tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 16), [&](const tbb::blocked_range<size_t>& r) {
+    s.metric.scaled ? fill(r, std::true_type{}) : fill(r, std::false_type{});
   });
 }
 

@@ -6,7 +6,7 @@
 
 namespace distband::band_internal {
 
-LinkTables::LinkTables(const Stencil& stencil) {
+LinkTables::LinkTables(const Stencil& stencil, const Vec3d& scale) {
   const std::vector<Coord>& sl = stencil.links;
   auto isLinkOrZero = [&](const Coord& v) {
     if (v.x == 0 && v.y == 0 && v.z == 0) return true;
@@ -14,7 +14,7 @@ LinkTables::LinkTables(const Stencil& stencil) {
   };
   for (size_t i = 0; i < sl.size(); ++i) {
     const Coord& l = sl[i];
-    links_.push_back({l.x, l.y, l.z, l.x * 64 + l.y * 8 + l.z, 13, uint32_t(i), double(l.x), double(l.y), double(l.z),
+    links_.push_back({l.x, l.y, l.z, l.x * 64 + l.y * 8 + l.z, 13, uint32_t(i), l.x * scale.x, l.y * scale.y, l.z * scale.z,
                       !stencil.fcc});
   }
   const int rep_local[3] = {0, 1, kBrickSize - 1};  // a representative local coordinate of each class

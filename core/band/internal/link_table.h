@@ -20,25 +20,28 @@ struct Link {
   int offset;          // added to the source's brick offset: the target's offset in its own brick
   int brick;           // which of the 3x3x3 neighbouring bricks holds the target (13: the same one)
   uint32_t dir;        // index of the link in the stencil (stored in the target's key)
-  double fx, fy, fz;   // the link as doubles, so point-site distances need no conversions
+  double fx, fy, fz;   // the link in unit space (Grid::axisScale), so site distances need no conversions
   bool propagates_to;  // true when the target always propagates (every cubic stencil)
 };
 
 class LinkTables {
  public:
-  explicit LinkTables(const Stencil& stencil);
+  /// `scale`: the grid's axis scales (unit space per voxel step, Grid::axisScale).
+  LinkTables(const Stencil& stencil, const Vec3d& scale);
 
   /// Every link of the stencil, in stencil order (brick 13, offsets relative to an interior source).
   const std::vector<Link>& all() const { return links_; }
   /// The position class of a brick-local coordinate along one axis: 0, 1..6 or 7.
   static int positionClass(int v) { return v == 0 ? 0 : (v == kBrickSize - 1 ? 2 : 1); }
-  static int tableOf(const Coord& local, uint32_t dir) {
+  [[gnu::always_inline]] static int tableOf(const Coord& local, uint32_t dir) {
     return (positionClass(local.z) * 9 + positionClass(local.y) * 3 + positionClass(local.x)) * 32 + int(dir);
   }
-  const std::vector<Link>& linksFor(const Coord& local, uint32_t dir) const { return tables_[tableOf(local, dir)]; }
+  [[gnu::always_inline]] const std::vector<Link>& linksFor(const Coord& local, uint32_t dir) const {
+    return tables_[tableOf(local, dir)];
+  }
   /// The neighbouring bricks (bit Link::brick, never 13) that linksFor(local, dir) reaches: a push looks them up
   /// once, before its links.
-  uint32_t bricksFor(const Coord& local, uint32_t dir) const { return bricks_[tableOf(local, dir)]; }
+  [[gnu::always_inline]] uint32_t bricksFor(const Coord& local, uint32_t dir) const { return bricks_[tableOf(local, dir)]; }
 
  private:
   std::vector<Link> links_;

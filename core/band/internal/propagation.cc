@@ -77,7 +77,7 @@ struct TrianglePrep {
   }
 };
 
-template <bool kPoints, bool kExactBand>
+template <bool kPoints, bool kExactBand, bool kScaled>
 void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePrep& prep) {
   // Members copied to locals: the atomics and buffer writes below would otherwise force reloads every link.
   BrickTable& table = s.table;
@@ -96,8 +96,7 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePre
   const int psum = p.x + p.y + p.z;
   // Point sites: the offset from the site to p, so a neighbour's squared distance is three multiply-adds.
   Vec3d rel{};
-  const Coord ps = p + s.seeds.site_offset;  // p in the sites' index space (the grid this one may be a window of)
-  const Vec3d psd{double(ps.x), double(ps.y), double(ps.z)};
+  const Vec3d psd = s.metric.unitsOf<kScaled>(p);  // p in the sites' unit space (of the grid this one may be a window of)
   if constexpr (kPoints) rel = psd - s.seeds.points[site];
   // Triangle sites: the triangle prepared for every neighbour, and its plane (a lower bound, below).
   const TrianglePrep* tp = nullptr;
@@ -133,7 +132,7 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePre
       const double x = rel.x + d.fx, y = rel.y + d.fy, z = rel.z + d.fz;
       d2 = float(x * x + y * y + z * z);
     } else {
-      const Vec3d g{psd.x + d.fx, psd.y + d.fy, psd.z + d.fz};  // integers: exact
+      const Vec3d g{psd.x + d.fx, psd.y + d.fy, psd.z + d.fz};  // on a cubic grid integers: exact
       // The plane's distance bounds the triangle's from below: an offer it already shows to be worse is
       // rejected without the full test (float rounding is monotone, so the outcome is the same).
       const double plane = tp->unit_normal.dot(g - tp->plane_point);
@@ -212,12 +211,17 @@ void pushFromT(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePre
 // Specialised on the site kind and on whether the band is exact: the exact-band test on every link cost point seeds
 // ~5 % of the push's instructions when compiled in unconditionally.
 namespace {
-void pushWith(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePrep& prep) {
+template <bool kScaled>
+[[gnu::always_inline]] inline void pushWithScale(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePrep& prep) {
   const bool exact = s.seeds.band_exact;
   if (s.seeds.kind == SiteKind::kPoint)
-    exact ? pushFromT<true, true>(s, e, tb, prep) : pushFromT<true, false>(s, e, tb, prep);
+    exact ? pushFromT<true, true, kScaled>(s, e, tb, prep) : pushFromT<true, false, kScaled>(s, e, tb, prep);
   else
-    exact ? pushFromT<false, true>(s, e, tb, prep) : pushFromT<false, false>(s, e, tb, prep);
+    exact ? pushFromT<false, true, kScaled>(s, e, tb, prep) : pushFromT<false, false, kScaled>(s, e, tb, prep);
+}
+// ... and on whether the grid is anisotropic (its voxels' unit-space positions scaled).
+[[gnu::always_inline]] inline void pushWith(BandState& s, const FrontEntry& e, ThreadBuffers& tb, TrianglePrep& prep) {
+  s.metric.scaled ? pushWithScale<true>(s, e, tb, prep) : pushWithScale<false>(s, e, tb, prep);
 }
 }  // namespace
 
@@ -231,11 +235,10 @@ void insertBand(BandState& s) {
   const size_t sites = s.seeds.siteCount();
   if (sites >= kMaxSites)
     throw std::invalid_argument(fmt::format("too many sites ({}; at most {})", sites, kMaxSites - 1));
-  const double admit_limit = s.limit_vox + kLimitSlackVoxels;
+  const double admit_limit = s.limit_vox + kLimitSlackVoxels * s.slack_scale;
   const float limit2 = std::isfinite(admit_limit) ? float(admit_limit * admit_limit) : INFINITY;
   const bool exact = s.seeds.band_exact;
   const bool triangles = s.seeds.kind == SiteKind::kTriangle;
-  const Coord so = s.seeds.site_offset;
   // Band voxels are checked inside the parallel loop (a serial pass over the band would be ~5 % of the insertion's
   // instructions); the first bad one (lowest index) is reported after it, so the error does not depend on threads.
   std::atomic<size_t> first_bad{~size_t(0)};
@@ -273,9 +276,9 @@ void insertBand(BandState& s) {
           tri.emplace(t[0], t[1], t[2]);
           tri_site = site;
         }
-        d2 = float(tri->dist2({double(v.voxel.x) + so.x, double(v.voxel.y) + so.y, double(v.voxel.z) + so.z}));
+        d2 = float(tri->dist2(s.metric.unitsOf(v.voxel)));
       } else {
-        d2 = s.metric.key2(site, v.voxel.x, v.voxel.y, v.voxel.z);
+        d2 = s.metric.key2(site, s.metric.unitsOf(v.voxel));
       }
       if (d2 > limit2) continue;
       const Coord bc{v.voxel.x >> kBrickLog2, v.voxel.y >> kBrickLog2, v.voxel.z >> kBrickLog2};

@@ -157,21 +157,30 @@ void scanAndCheck(BandState& s) {
   });
 }
 
-void checkVoxel(const BandState& s, const VoxelRef& v, const Coord& q, uint64_t k, uint64_t* block,
-                ThreadBuffers& tb) {
+namespace {
+template <bool kScaled>
+void checkVoxelT(const BandState& s, const VoxelRef& v, const Coord& q, uint64_t k, uint64_t* block,
+                 ThreadBuffers& tb) {
   gatherBlockInline(s, q, block);
   uint64_t best = k;
   uint32_t last_site = keySite(k);
+  const Vec3d p = s.metric.unitsOf<kScaled>(q);
   for (int j = 0; j < 125; ++j) {
     const uint64_t nk = block[j];
     if (nk == kUntouched) continue;
     const uint32_t site = keySite(nk);
     if (site == last_site || site == keySite(best)) continue;
     last_site = site;
-    const uint64_t cand = packKey(s.metric.key2(site, q.x, q.y, q.z), kNoDirection, site);
+    const uint64_t cand = packKey(s.metric.key2(site, p), kNoDirection, site);
     if (cand < best) best = cand;
   }
   if (keySite(best) != keySite(k)) tb.corrections.push_back({v, best});
+}
+}  // namespace
+
+void checkVoxel(const BandState& s, const VoxelRef& v, const Coord& q, uint64_t k, uint64_t* block,
+                ThreadBuffers& tb) {
+  s.metric.scaled ? checkVoxelT<true>(s, v, q, k, block, tb) : checkVoxelT<false>(s, v, q, k, block, tb);
 }
 
 FrontList correct(BandState& s, bool first_round) {

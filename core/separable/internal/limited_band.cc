@@ -12,23 +12,32 @@
 #include <cstdlib>
 #include <cstring>
 #include <new>
+#include <tuple>
+#include <type_traits>
 
 #include "core/brick.h"
-#include "core/separable/internal/lines.h"
+#include "core/separable/internal/volume_lines.h"
 
 namespace distband::separable_internal {
 namespace {
 
-constexpr int kStride[3] = {64, 8, 1};              // brickOffset's step along x, y, z
-constexpr int kWindowReach = 16;                    // see squaredDistancesWithin
-constexpr uint32_t kWindowFar = uint32_t(1) << 30;  // "far" inside the window minimum: far + reach^2 cannot wrap
+constexpr int kStride[3] = {64, 8, 1};  // brickOffset's step along x, y, z
+constexpr int kWindowReach = 16;        // see cellsWithin
 
 bool hasZeroByte(uint64_t w) { return ((w - 0x0101010101010101ull) & ~w & 0x8080808080808080ull) != 0; }
 
 int along(const Coord& c, int axis) { return axis == 0 ? c.x : axis == 1 ? c.y : c.z; }
 
+/// "Far" inside the window minimum: far plus reach^2 can neither wrap nor pass for a value within the cut.
+template <class C>
+C windowFar() {
+  if constexpr (std::is_same_v<C, uint32_t>) return uint32_t(1) << 30;
+  else if constexpr (std::is_same_v<C, Tagged<uint32_t>>) return {uint32_t(1) << 30, 0};
+  else return CellOps<C>::far();
+}
+
 /// Bricks of one pass, in runs of consecutive bricks along the pass's axis. `slot` indexes the pool; a brick whose
-/// slot holds no values yet (the growth added it) starts all kFarSquared.
+/// slot holds no values yet (the growth added it) starts all far.
 struct Runs {
   struct Run {
     int other[2];  // the run's brick coordinates on the two other axes (ascending axis order)
@@ -37,22 +46,20 @@ struct Runs {
   };
   std::vector<Run> runs;
   std::vector<uint32_t> slot;
-  std::vector<uint8_t> seed;  // the brick was listed, not added by the growth (pass 1: it holds a seed's boundary)
+  std::vector<uint8_t> seed;  // the brick was listed, not added by the growth (pass 1: it holds a boundary)
 };
-
-/// Brick values by slot: null until the brick holds a value (bricks live in a BrickArena).
-using Pool = std::vector<uint32_t*>;
 
 /// Where bricks live: carved from slabs, one open slab per thread. First touches of fresh memory are a large part of
 /// a pass's cost (page faults are slow on virtual machines): 2 MiB slabs ask for transparent huge pages, and a brick
 /// is only allocated once it holds a value.
+template <class C>
 class BrickArena {
  public:
-  static constexpr size_t kBrickBytes = kBrickVoxels * sizeof(uint32_t);
+  static constexpr size_t kBrickBytes = kBrickVoxels * sizeof(C);
   // Each thread's slabs double from 64 KiB to 2 MiB, so a small band does not hold megabytes per thread (the space a
   // thread's open slab leaves unused is at most what it already holds, plus 64 KiB), and a large one gets huge pages.
   static constexpr size_t kFirstSlabBytes = size_t(64) << 10, kHugeSlabBytes = size_t(2) << 20;
-  uint32_t* allocate() {
+  C* allocate() {
     Local& l = local_.local();
     if (l.left == 0) {
       const size_t bytes = l.slab_bytes;
@@ -62,12 +69,12 @@ class BrickArena {
       if (bytes == kHugeSlabBytes) ::madvise(p, bytes, MADV_HUGEPAGE);  // advice only: without it, 4 KiB pages
 #endif
       l.slabs.emplace_back(p, std::free);
-      l.next = static_cast<uint32_t*>(p);
+      l.next = static_cast<C*>(p);
       l.left = bytes / kBrickBytes;
       l.slab_bytes = std::min(2 * bytes, kHugeSlabBytes);
     }
     --l.left;
-    uint32_t* b = l.next;
+    C* b = l.next;
     l.next += kBrickVoxels;
     return b;
   }
@@ -82,7 +89,7 @@ class BrickArena {
  private:
   struct Local {
     std::vector<std::shared_ptr<void>> slabs;
-    uint32_t* next = nullptr;
+    C* next = nullptr;
     size_t left = 0;
     size_t slab_bytes = kFirstSlabBytes;
   };
@@ -96,6 +103,7 @@ struct BrickRef {
   int c[3];
   uint32_t slot;
 };
+template <class Pool>
 Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const Coord& brick_dims, Pool& pool) {
   const int o0 = axis == 0 ? 1 : 0, o1 = axis == 2 ? 1 : 2;  // the other two axes, ascending
   tbb::parallel_sort(bricks.begin(), bricks.end(), [&](const BrickRef& a, const BrickRef& b) {
@@ -135,6 +143,7 @@ Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const Coord& 
 }
 
 /// The pool slots still allocated, as bricks (unordered).
+template <class Pool>
 std::vector<BrickRef> liveBricks(const Runs& r, int axis, const Pool& pool) {
   const int o0 = axis == 0 ? 1 : 0, o1 = axis == 2 ? 1 : 2;
   std::vector<BrickRef> out;
@@ -152,34 +161,45 @@ std::vector<BrickRef> liveBricks(const Runs& r, int axis, const Pool& pool) {
   return out;
 }
 
-/// Per-thread scratch of a line pass: a line's input and output, and the envelope's stacks.
+/// Per-thread scratch of a line pass: a line's input and output, its labels (with the reach beyond both ends), the
+/// envelope's stacks, and eight lines side by side padded by the reach both ways (the window minimum).
+template <class C, class T>
 struct LineScratch {
-  std::vector<uint32_t> f, d;
+  std::vector<C> f, d;
+  std::vector<T> labels;
+  LabelLineScratch<C> runs;
   std::vector<int> v;
   std::vector<double> z;
-  std::vector<std::array<uint32_t, kBrickSize>> lanes;  // eight lines side by side, padded by the reach both ways
+  std::vector<std::array<C, kBrickSize>> lanes;
   LineScratch(int n, int reach)
-      : f(size_t(n)), d(size_t(n)), v(size_t(n)), z(size_t(n) + 1), lanes(size_t(n) + 2 * size_t(reach)) {}
+      : f(size_t(n)),
+        d(size_t(n)),
+        labels(size_t(n) + 2 * size_t(reach)),
+        runs(n),
+        v(size_t(n)),
+        z(2 * size_t(n) + 2),
+        lanes(size_t(n) + 2 * size_t(reach)) {}
 };
 
-/// Runs `lines(run index, base, w_end, length, brick values, scratch)` for every eight lines of voxels of every run
+/// Runs `lines(run index, u, base, w_end, length, brick values, scratch)` for every eight lines of voxels of every run
 /// that share their local coordinate u on the first other axis: line w (< w_end, inside the grid) is voxel offset
 /// base + w * kStride[second other axis] + i * kStride[axis] of brick i / 8 at position i < length. In parallel over
 /// runs. A run's fresh bricks are worked on in scratch and allocated from `arena` only if they got a value. False
 /// when interrupted.
-template <typename Lines>
-bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, Pool& pool, BrickArena& arena,
-                  const Interrupter* interrupter, const Lines& lines) {
+template <class C, class T, class Lines>
+bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, std::vector<C*>& pool,
+                  BrickArena<C>& arena, const Interrupter* interrupter, const Lines& lines) {
+  using Ops = CellOps<C>;
   const int o0 = axis == 0 ? 1 : 0, o1 = axis == 2 ? 1 : 2;
   const int n[3] = {dims.x, dims.y, dims.z};
   // Scratch per thread, not per range: ranges are a few runs each, and fresh buffers cost more than the runs' lines.
-  tbb::enumerable_thread_specific<LineScratch> scratches(n[axis], reach_voxels);
-  tbb::enumerable_thread_specific<std::vector<uint32_t*>> brick_lists;
-  tbb::enumerable_thread_specific<std::vector<uint32_t>> fresh_scratch;
+  tbb::enumerable_thread_specific<LineScratch<C, T>> scratches(n[axis], reach_voxels);
+  tbb::enumerable_thread_specific<std::vector<C*>> brick_lists;
+  tbb::enumerable_thread_specific<std::vector<C>> fresh_scratch;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, r.runs.size(), 4), [&](const tbb::blocked_range<size_t>& range) {
-    std::vector<uint32_t*>& bricks = brick_lists.local();
-    std::vector<uint32_t>& fresh = fresh_scratch.local();
-    LineScratch& scratch = scratches.local();
+    std::vector<C*>& bricks = brick_lists.local();
+    std::vector<C>& fresh = fresh_scratch.local();
+    LineScratch<C, T>& scratch = scratches.local();
     for (size_t ri = range.begin(); ri != range.end(); ++ri) {
       if (isInterrupted(interrupter)) return;
       const Runs::Run& run = r.runs[ri];
@@ -191,7 +211,7 @@ bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, 
         bricks[i] = pool[r.slot[run.first + i]];
         if (!bricks[i]) {
           bricks[i] = fresh.data() + i * kBrickVoxels;
-          std::fill(bricks[i], bricks[i] + kBrickVoxels, kFarSquared);
+          std::fill(bricks[i], bricks[i] + kBrickVoxels, Ops::far());
         }
       }
       const int length = std::min(int(count) * kBrickSize, n[axis] - run.lo * kBrickSize);
@@ -199,9 +219,9 @@ bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, 
       const int w_end = std::min(kBrickSize, n[o1] - run.other[1] * kBrickSize);
       for (int u = 0; u < u_end; ++u) lines(ri, u, u * kStride[o0], w_end, length, bricks.data(), scratch);
       for (size_t i = 0; i < count; ++i) {
-        uint32_t*& slot = pool[r.slot[run.first + i]];
-        const uint32_t* v = bricks[i];
-        if (slot || std::all_of(v, v + kBrickVoxels, [](uint32_t x) { return x == kFarSquared; })) continue;
+        C*& slot = pool[r.slot[run.first + i]];
+        const C* v = bricks[i];
+        if (slot || std::all_of(v, v + kBrickVoxels, [](const C& x) { return Ops::isFar(x); })) continue;
         slot = arena.allocate();
         std::copy(v, v + kBrickVoxels, slot);
       }
@@ -212,158 +232,261 @@ bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, 
 
 }  // namespace
 
-const uint32_t* SquaredBricks::find(uint64_t key) const {
+template <class C>
+const C* CellBricks<C>::find(uint64_t key) const {
   const auto it = std::lower_bound(keys.begin(), keys.end(), key);
   return it != keys.end() && *it == key ? values[size_t(it - keys.begin())] : nullptr;
 }
 
-std::vector<uint8_t> classifyMaskBricks(const Grid& grid, const std::vector<uint8_t>& mask,
-                                        const Interrupter* interrupter) {
+template <class T>
+BrickClasses classifyBricks(const Grid& grid, const T* labels, bool multi_label, const Interrupter* interrupter) {
   const Coord dims = grid.dims(), bd = grid.brickDims();
-  std::vector<uint8_t> kinds(size_t(grid.brickCount()));
-  // One line of bricks (by, bz) at a time: its 64 voxel rows are read front to back, a word per brick.
+  BrickClasses out;
+  out.mask.assign(size_t(grid.brickCount()), 0);
+  if (multi_label) {
+    out.uniform.assign(out.mask.size(), 0);
+    out.label.assign(out.mask.size(), 0);
+  }
+  // One line of bricks (by, bz) at a time: its 64 voxel rows are read front to back (uint8: a word per brick row).
   tbb::parallel_for(tbb::blocked_range<size_t>(0, size_t(bd.y) * bd.z, 4), [&](const tbb::blocked_range<size_t>& r) {
-    std::vector<uint8_t> any(size_t(bd.x)), all(size_t(bd.x));
+    std::vector<uint8_t> any(size_t(bd.x)), all(size_t(bd.x)), same(multi_label ? size_t(bd.x) : 0);
+    std::vector<T> first(multi_label ? size_t(bd.x) : 0);
     for (size_t line = r.begin(); line != r.end(); ++line) {
       if (isInterrupted(interrupter)) return;
       const int by = int(line % size_t(bd.y)), bz = int(line / size_t(bd.y));
       std::fill(any.begin(), any.end(), 0);
       std::fill(all.begin(), all.end(), 1);
+      std::fill(same.begin(), same.end(), 1);
+      const T* corner = labels + (size_t(bz) * kBrickSize * dims.y + size_t(by) * kBrickSize) * dims.x;
+      for (size_t bx = 0; bx < first.size(); ++bx) first[bx] = corner[bx * kBrickSize];
       for (int z = bz * kBrickSize; z < std::min(dims.z, (bz + 1) * kBrickSize); ++z)
         for (int y = by * kBrickSize; y < std::min(dims.y, (by + 1) * kBrickSize); ++y) {
-          const uint8_t* row = mask.data() + (size_t(z) * dims.y + y) * dims.x;
+          const T* row = labels + (size_t(z) * dims.y + y) * dims.x;
           int bx = 0;
-          for (; (bx + 1) * kBrickSize <= dims.x; ++bx) {
-            uint64_t word;
-            std::memcpy(&word, row + bx * kBrickSize, sizeof word);
-            any[size_t(bx)] |= word != 0;
-            all[size_t(bx)] &= !hasZeroByte(word);
+          if constexpr (std::is_same_v<T, uint8_t>) {
+            if (!multi_label)
+              for (; (bx + 1) * kBrickSize <= dims.x; ++bx) {
+                uint64_t word;
+                std::memcpy(&word, row + bx * kBrickSize, sizeof word);
+                any[size_t(bx)] |= word != 0;
+                all[size_t(bx)] &= !hasZeroByte(word);
+              }
           }
-          for (int x = bx * kBrickSize; x < dims.x; ++x) {  // a partial brick at the far face
-            any[size_t(bx)] |= row[x] != 0;
-            all[size_t(bx)] &= row[x] != 0;
+          for (int x = bx * kBrickSize; x < dims.x; ++x) {
+            const size_t b = size_t(x >> kBrickLog2);
+            any[b] |= row[x] != 0;
+            all[b] &= row[x] != 0;
+            if (multi_label) same[b] &= row[x] == first[b];
           }
         }
-      uint8_t* out = kinds.data() + line * size_t(bd.x);
-      for (size_t bx = 0; bx < size_t(bd.x); ++bx)
-        out[bx] = !any[bx] ? kNoMaskVoxel : all[bx] ? kAllMaskVoxels : kSomeMaskVoxels;
+      const size_t at = line * size_t(bd.x);
+      for (size_t bx = 0; bx < size_t(bd.x); ++bx) {
+        out.mask[at + bx] = !any[bx] ? kNoMaskVoxel : all[bx] ? kAllMaskVoxels : kSomeMaskVoxels;
+        if (multi_label) {
+          out.uniform[at + bx] = same[bx];
+          out.label[at + bx] = uint32_t(first[bx]);
+        }
+      }
     }
   });
-  return kinds;
+  return out;
 }
 
-bool squaredDistancesWithin(const Grid& grid, const std::vector<uint8_t>& mask, const std::vector<uint8_t>& kinds,
-                            bool seeds_nonzero, uint32_t cut2, const Interrupter* interrupter, SquaredBricks* out) {
+template <class C, class T>
+bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes, const BandMeasure& measure,
+                 typename CellOps<C>::Dist cut2, const double w2[3], const Interrupter* interrupter,
+                 CellBricks<C>* out) {
+  using Ops = CellOps<C>;
   const Coord dims = grid.dims(), bd = grid.brickDims();
-  const uint8_t all_seeds = seeds_nonzero ? kAllMaskVoxels : kNoMaskVoxel;
-  const uint8_t no_seeds = seeds_nonzero ? kNoMaskVoxel : kAllMaskVoxels;
-  // The bricks holding a seed's boundary: mixed ones, and all-seed ones beside a brick that is not all seeds.
+  const bool multi = measure.multi_label;
+  const uint8_t all_seeds = measure.seeds_nonzero ? kAllMaskVoxels : kNoMaskVoxel;
+  const uint8_t no_seeds = measure.seeds_nonzero ? kNoMaskVoxel : kAllMaskVoxels;
+  // Where what a target measures to can lie: seed field, the bricks holding a seed's boundary (mixed ones, and
+  // all-seed ones beside a brick that is not all seeds); multi-label, the bricks holding a label boundary (mixed ones,
+  // uniform ones beside a brick that is not uniform of the same label, and with a black border those at the faces).
+  auto boundaryBrick = [&](int bx, int by, int bz) {
+    const size_t b = size_t(grid.brickIndex({bx, by, bz}));
+    const int c[3] = {bx, by, bz};
+    if (multi) {
+      if (!classes.uniform[b]) return true;
+      for (int a = 0; a < 3; ++a)
+        for (int s : {-1, 1}) {
+          int nc[3] = {c[0], c[1], c[2]};
+          nc[a] += s;
+          if (nc[a] < 0 || nc[a] >= along(bd, a)) {
+            if ((measure.black_border >> (2 * a + (s > 0))) & 1) return true;
+            continue;
+          }
+          const size_t n = size_t(grid.brickIndex({nc[0], nc[1], nc[2]}));
+          if (!classes.uniform[n] || classes.label[n] != classes.label[b]) return true;
+        }
+      return false;
+    }
+    const uint8_t kind = classes.mask[b];
+    bool boundary = kind == kSomeMaskVoxels;
+    if (kind == all_seeds)
+      for (int a = 0; a < 3 && !boundary; ++a)
+        for (int s : {-1, 1}) {
+          int nc[3] = {c[0], c[1], c[2]};
+          nc[a] += s;
+          if (nc[a] < 0 || nc[a] >= along(bd, a)) continue;
+          if (classes.mask[size_t(grid.brickIndex({nc[0], nc[1], nc[2]}))] != all_seeds) boundary = true;
+        }
+    return boundary && kind != no_seeds;
+  };
   std::vector<std::vector<BrickRef>> per_slab(size_t(bd.z));
   tbb::parallel_for(0, bd.z, [&](int bz) {
     if (isInterrupted(interrupter)) return;
     for (int by = 0; by < bd.y; ++by)
-      for (int bx = 0; bx < bd.x; ++bx) {
-        const uint8_t kind = kinds[size_t(grid.brickIndex({bx, by, bz}))];
-        bool boundary = kind == kSomeMaskVoxels;
-        if (kind == all_seeds)
-          for (int a = 0; a < 3 && !boundary; ++a)
-            for (int s : {-1, 1}) {
-              int nc[3] = {bx, by, bz};
-              nc[a] += s;
-              if (nc[a] < 0 || nc[a] >= along(bd, a)) continue;
-              if (kinds[size_t(grid.brickIndex({nc[0], nc[1], nc[2]}))] != all_seeds) boundary = true;
-            }
-        if (boundary && kind != no_seeds) per_slab[size_t(bz)].push_back({{bx, by, bz}, kNoSlot});
-      }
+      for (int bx = 0; bx < bd.x; ++bx)
+        if (boundaryBrick(bx, by, bz)) per_slab[size_t(bz)].push_back({{bx, by, bz}, kNoSlot});
   });
   if (isInterrupted(interrupter)) return false;
   std::vector<BrickRef> bricks;
   for (auto& slab : per_slab) bricks.insert(bricks.end(), slab.begin(), slab.end());
   std::vector<std::vector<BrickRef>>().swap(per_slab);
+  // Multi-label: a run end along y or z is a label boundary of its own, known from the labels and not from the
+  // previous pass's values, so the boundary bricks join every pass (a boundary parallel to x leaves pass 1 nothing).
+  const std::vector<BrickRef> boundary = multi ? bricks : std::vector<BrickRef>();
+  auto withBoundary = [&](std::vector<BrickRef> live) {
+    if (!multi) return live;
+    live.insert(live.end(), boundary.begin(), boundary.end());  // boundary entries have no slot: after live ones
+    std::stable_sort(live.begin(), live.end(), [](const BrickRef& a, const BrickRef& b) {
+      return std::tie(a.c[2], a.c[1], a.c[0]) < std::tie(b.c[2], b.c[1], b.c[0]);
+    });
+    live.erase(std::unique(live.begin(), live.end(),
+                           [](const BrickRef& a, const BrickRef& b) {
+                             return a.c[0] == b.c[0] && a.c[1] == b.c[1] && a.c[2] == b.c[2];
+                           }),
+               live.end());
+    return live;
+  };
 
-  const int reach_voxels = int(std::floor(std::sqrt(double(cut2))));
-  const int reach_bricks = (reach_voxels + kBrickSize - 1) / kBrickSize;
-  const auto keep = [cut2](uint32_t d2) { return d2 <= cut2 ? d2 : kFarSquared; };
-  // Passes 2 and 3 take the minimum over the reach directly (2 reach + 1 candidates a voxel, eight lines at once)
-  // when that is cheaper than the envelope's per-voxel bookkeeping: limits up to ~16 voxels.
-  const bool window = reach_voxels <= kWindowReach;
-  Pool pool;
-  BrickArena arena;
-  // Pass 1, along x: each voxel's squared distance to the nearest seed of its row (within the boundary bricks).
-  Runs runs = buildRuns(bricks, 0, reach_bricks, bd, pool);
-  const bool ok1 = forEachLines(
-      runs, 0, dims, reach_voxels, pool, arena, interrupter,
-      [&](size_t ri, int u, int base, int w_end, int length, uint32_t* const* values, LineScratch&) {
+  // The reach along each axis: voxels (of that axis) within sqrt(cut2) units.
+  const double reach_units = std::sqrt(double(cut2));
+  int reach_voxels[3], reach_bricks[3];
+  for (int a = 0; a < 3; ++a) {
+    reach_voxels[a] = int(std::min(std::floor(reach_units / std::sqrt(w2[a])), double(kMaxGridDim)));
+    reach_bricks[a] = (reach_voxels[a] + kBrickSize - 1) / kBrickSize;
+  }
+  const auto keep = [cut2](const C& c) { return Ops::dist(c) <= cut2 ? c : Ops::far(); };
+  std::vector<C*> pool;
+  BrickArena<C> arena;
+  const int N[3] = {dims.x, dims.y, dims.z};
+  // The labels a multi-label line pass reads: its voxels and up to the reach beyond each end, within the grid.
+  auto knownLabels = [&](int axis, int start, int length) {
+    KnownLabels k;
+    k.before = std::min(start, reach_voxels[axis]);
+    k.after = std::min(N[axis] - (start + length), reach_voxels[axis]);
+    k.face_before = start - k.before == 0;
+    k.face_after = start + length + k.after == N[axis];
+    k.border_before = (measure.black_border >> (2 * axis)) & 1;
+    k.border_after = (measure.black_border >> (2 * axis + 1)) & 1;
+    return k;
+  };
+  // Pass 1, along x: each voxel's squared distance to the nearest seed of its row (within the boundary bricks), or,
+  // multi-label, to the nearest end of its label run.
+  Runs runs = buildRuns(bricks, 0, reach_bricks[0], bd, pool);
+  const bool ok1 = forEachLines<C, T>(
+      runs, 0, dims, reach_voxels[0], pool, arena, interrupter,
+      [&](size_t ri, int u, int base, int w_end, int length, C* const* values, LineScratch<C, T>& s) {
         const Runs::Run& run = runs.runs[ri];
         const uint8_t* seed_brick = runs.seed.data() + run.first;
+        const int x0 = run.lo * kBrickSize;
         for (int w = 0; w < w_end; ++w) {
           const size_t y = size_t(run.other[0]) * kBrickSize + size_t(u),
                        z = size_t(run.other[1]) * kBrickSize + size_t(w);
-          const uint8_t* row = mask.data() + (z * size_t(dims.y) + y) * size_t(dims.x) + size_t(run.lo) * kBrickSize;
+          const T* row = labels + (z * size_t(dims.y) + y) * size_t(dims.x) + size_t(x0);
           const int line = base + w * kStride[2];
-          auto isSeed = [&](int i) { return seed_brick[i / kBrickSize] && (row[i] != 0) == seeds_nonzero; };
-          int last = -1;
-          for (int i = 0; i < length; ++i) {
-            if (isSeed(i)) last = i;
-            if (last >= 0)
-              values[i / kBrickSize][line + (i % kBrickSize) * kStride[0]] = keep(uint32_t((i - last) * (i - last)));
-          }
-          last = -1;
-          for (int i = length - 1; i >= 0; --i) {
-            if (isSeed(i)) last = i;
-            if (last < 0) continue;
-            uint32_t& v = values[i / kBrickSize][line + (i % kBrickSize) * kStride[0]];
-            v = std::min(v, keep(uint32_t((last - i) * (last - i))));
+          auto at = [&](int i) -> C& { return values[i / kBrickSize][line + (i % kBrickSize) * kStride[0]]; };
+          if (multi) {
+            otherLabelLine<C, T>(row, length, knownLabels(0, x0, length), nullptr, s.d.data(), w2[0], s.runs);
+            for (int i = 0; i < length; ++i) at(i) = keep(s.d[size_t(i)]);
+          } else {
+            const bool nonzero = measure.seeds_nonzero;
+            seedLine<C, true>(  // pass 1's bricks are fresh: all far
+                length, [&](int i) { return seed_brick[i / kBrickSize] && (row[i] != 0) == nonzero; },
+                [&](int i) { return uint32_t(row[i]); }, w2[0], [&](int i) -> const C& { return at(i); },
+                [&](int i, const C& c) { at(i) = keep(c); });
           }
         }
       });
   if (!ok1) return false;
-  // Passes 2 and 3, along y and z: the lower envelope of the previous pass's parabolas on each line.
+  // Passes 2 and 3, along y and z: the lower envelope of the previous pass's parabolas on each line (multi-label: on
+  // each label run of it).
   for (int axis : {1, 2}) {
-    bricks = liveBricks(runs, axis == 1 ? 0 : 1, pool);
-    runs = buildRuns(bricks, axis, reach_bricks, bd, pool);
+    bricks = withBoundary(liveBricks(runs, axis == 1 ? 0 : 1, pool));
+    runs = buildRuns(bricks, axis, reach_bricks[axis], bd, pool);
     const int o1 = axis == 2 ? 1 : 2;  // the second other axis: the lanes of a bundle
-    const bool ok =
-        forEachLines(runs, axis, dims, reach_voxels, pool, arena, interrupter,
-                     [&](size_t, int, int base, int w_end, int length, uint32_t* const* values, LineScratch& s) {
-                       auto at = [&](int i, int w) -> uint32_t& {
-                         return values[i / kBrickSize][base + w * kStride[o1] + (i % kBrickSize) * kStride[axis]];
-                       };
-                       if (window) {
-                         // Eight lines at once, side by side, padded by reach_voxels far rows at each end.
-                         auto* lane = s.lanes.data() + reach_voxels;
-                         bool any = false;
-                         for (int i = -reach_voxels; i < length + reach_voxels; ++i) lane[i].fill(kWindowFar);
-                         for (int i = 0; i < length; ++i)
-                           for (int w = 0; w < w_end; ++w) {
-                             const uint32_t f = at(i, w);
-                             any |= f != kFarSquared;
-                             if (f != kFarSquared) lane[i][size_t(w)] = f;
-                           }
-                         if (!any) return;
-                         for (int i = 0; i < length; ++i) {
-                           std::array<uint32_t, kBrickSize> m = lane[i];
-                           for (int k = 1; k <= reach_voxels; ++k) {
-                             const uint32_t kk = uint32_t(k * k);
-                             const auto& lo = lane[i - k];
-                             const auto& hi = lane[i + k];
-                             for (size_t w = 0; w < kBrickSize; ++w) m[w] = std::min(m[w], std::min(lo[w], hi[w]) + kk);
-                           }
-                           for (int w = 0; w < w_end; ++w) at(i, w) = keep(m[size_t(w)]);
-                         }
-                         return;
-                       }
-                       for (int w = 0; w < w_end; ++w) {
-                         bool any = false;
-                         for (int i = 0; i < length; ++i) {
-                           s.f[size_t(i)] = at(i, w);
-                           any |= s.f[size_t(i)] != kFarSquared;
-                         }
-                         if (!any) continue;
-                         parabolaEnvelope(s.f.data(), s.d.data(), length, s.v.data(), s.z.data());
-                         for (int i = 0; i < length; ++i) at(i, w) = keep(s.d[size_t(i)]);
-                       }
-                     });
+    const int reach = reach_voxels[axis];
+    // The window minimum takes 2 reach + 1 candidates a voxel, eight lines at once: cheaper than the envelope's
+    // per-voxel bookkeeping up to ~16 voxels.
+    const bool window = !multi && reach <= kWindowReach;
+    const double wa = w2[axis];
+    const bool ok = forEachLines<C, T>(
+        runs, axis, dims, reach, pool, arena, interrupter,
+        [&](size_t ri, int u, int base, int w_end, int length, C* const* values, LineScratch<C, T>& s) {
+          auto at = [&](int i, int w) -> C& {
+            return values[i / kBrickSize][base + w * kStride[o1] + (i % kBrickSize) * kStride[axis]];
+          };
+          if (window) {
+            // Eight lines at once, side by side, padded by `reach` far rows at each end.
+            auto* lane = s.lanes.data() + reach;
+            bool any = false;
+            for (int i = -reach; i < length + reach; ++i) lane[i].fill(windowFar<C>());
+            for (int i = 0; i < length; ++i)
+              for (int w = 0; w < w_end; ++w) {
+                const C f = at(i, w);
+                any |= !Ops::isFar(f);
+                if (!Ops::isFar(f)) lane[i][size_t(w)] = f;
+              }
+            if (!any) return;
+            for (int i = 0; i < length; ++i) {
+              std::array<C, kBrickSize> m = lane[i];
+              for (int k = 1; k <= reach; ++k) {
+                const auto& lo = lane[i - k];
+                const auto& hi = lane[i + k];
+                if constexpr (std::is_same_v<C, uint32_t>) {
+                  const uint32_t kk = uint32_t(k * k);
+                  for (size_t w = 0; w < kBrickSize; ++w) m[w] = std::min(m[w], std::min(lo[w], hi[w]) + kk);
+                } else {
+                  for (size_t w = 0; w < kBrickSize; ++w) {
+                    const C c = Ops::plus(Ops::less(hi[w], lo[w]) ? hi[w] : lo[w], wa, k);
+                    if (Ops::less(c, m[w])) m[w] = c;
+                  }
+                }
+              }
+              for (int w = 0; w < w_end; ++w) at(i, w) = keep(m[size_t(w)]);
+            }
+            return;
+          }
+          const Runs::Run& run = runs.runs[ri];
+          const int start = run.lo * kBrickSize;
+          const KnownLabels known = multi ? knownLabels(axis, start, length) : KnownLabels{};
+          for (int w = 0; w < w_end; ++w) {
+            bool any = false;
+            for (int i = 0; i < length; ++i) {
+              s.f[size_t(i)] = at(i, w);
+              any |= !Ops::isFar(s.f[size_t(i)]);
+            }
+            if (!any && !multi) continue;  // multi-label: the run ends along this line count without any value
+            if (multi) {
+              // The line's labels, `known` beyond its ends: a gather along y or z.
+              int c[3];
+              c[0] = run.other[0] * kBrickSize + u;  // x: the first other axis of both passes
+              c[o1] = run.other[1] * kBrickSize + w;
+              const int64_t step = axis == 1 ? int64_t(dims.x) : int64_t(dims.x) * dims.y;
+              c[axis] = start - known.before;
+              const T* p = labels + (int64_t(c[2]) * dims.y + c[1]) * dims.x + c[0];
+              const int total = known.before + length + known.after;
+              for (int i = 0; i < total; ++i) s.labels[size_t(i)] = p[i * step];
+              otherLabelLine<C, T>(s.labels.data() + known.before, length, known, s.f.data(), s.d.data(), wa, s.runs);
+            } else {
+              parabolaEnvelope(s.f.data(), s.d.data(), length, wa, s.v.data(), s.z.data());
+            }
+            for (int i = 0; i < length; ++i) at(i, w) = keep(s.d[size_t(i)]);
+          }
+        });
     if (!ok) return false;
   }
   bricks = liveBricks(runs, 2, pool);
@@ -382,5 +505,24 @@ bool squaredDistancesWithin(const Grid& grid, const std::vector<uint8_t>& mask, 
   arena.release(&out->storage);
   return true;
 }
+
+// The cells and label types the separable volume EDT runs with.
+#define DISTBAND_CELLS_WITHIN(C, T)                                                                                  \
+  template bool cellsWithin<C, T>(const Grid&, const T*, const BrickClasses&, const BandMeasure&,                    \
+                                  typename CellOps<C>::Dist, const double[3], const Interrupter*, CellBricks<C>*);
+#define DISTBAND_FOR_LABELS(C)      \
+  DISTBAND_CELLS_WITHIN(C, uint8_t)  \
+  DISTBAND_CELLS_WITHIN(C, uint16_t) \
+  DISTBAND_CELLS_WITHIN(C, uint32_t) \
+  template struct CellBricks<C>;
+DISTBAND_FOR_LABELS(uint32_t)
+DISTBAND_FOR_LABELS(float)
+DISTBAND_FOR_LABELS(Tagged<uint32_t>)
+DISTBAND_FOR_LABELS(Tagged<float>)
+#undef DISTBAND_FOR_LABELS
+#undef DISTBAND_CELLS_WITHIN
+template BrickClasses classifyBricks<uint8_t>(const Grid&, const uint8_t*, bool, const Interrupter*);
+template BrickClasses classifyBricks<uint16_t>(const Grid&, const uint16_t*, bool, const Interrupter*);
+template BrickClasses classifyBricks<uint32_t>(const Grid&, const uint32_t*, bool, const Interrupter*);
 
 }  // namespace distband::separable_internal

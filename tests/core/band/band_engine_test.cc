@@ -238,7 +238,7 @@ std::vector<VolumeCase> volumeCases(int n) {
 
 Seeds volumeSeeds(const Grid& grid, const std::vector<uint8_t>& mask, bool signed_distance) {
   Seeds s;
-  EXPECT_TRUE(IsOk(makeVolumeSeeds(grid, mask, signed_distance, &s)));
+  EXPECT_TRUE(IsOk(makeVolumeSeeds(grid, LabelVolume::ofMask(grid.dims(), mask), signed_distance, &s)));
   return s;
 }
 
@@ -347,6 +347,65 @@ PointCase outsideCase() {
 TEST(EngineExactness, PointSeedsOutsideTheGrid) {
   const PointCase pc = outsideCase();
   checkPointExactness(pc.name, pc.grid, pc.world_points);
+}
+
+// Anisotropic voxels (the band's sites and offers in unit space, core/grid.h): distances in world units against brute
+// force with the same spacing. Exact mode with cubic26 keeps point seeds exact; every other stencil and mode is
+// reported.
+TEST(EngineExactness, PointSeedsOnAnisotropicVoxels) {
+  for (const Vec3d spacing : {Vec3d{0.5, 0.5, 2.5}, Vec3d{1.0, 0.7, 0.4}}) {
+    const Grid grid({-1.0, 2.0, 0.5}, spacing, {36, 30, 20});
+    const std::vector<Vec3d> world = {{3.13, 6.02, 9.31}, {12.7, 14.3, 30.4}, {0.2, 12.9, 20.1}, {9.0, 9.0, 17.9}};
+    std::vector<std::array<double, 3>> idx;
+    for (const Vec3d& w : world)  // index space computed here, independent of core
+      idx.push_back({(w.x + 1.0) / spacing.x, (w.y - 2.0) / spacing.y, (w.z - 0.5) / spacing.z});
+    const Coord d = grid.dims();
+    std::vector<double> expected = oracle::bruteForceDistanceSqr(d.x, d.y, d.z, idx, {spacing.x, spacing.y, spacing.z});
+    const double unit = std::min({spacing.x, spacing.y, spacing.z});
+    for (double& x : expected) x = std::sqrt(x) / unit;
+    const Seeds seeds = pointSeeds(grid, world);
+    for (PropagationMode mode : kAllModes)
+      for (StencilKind stencil : kAllStencils) {
+        const std::string what = fmt::format("anisotropic points {},{},{} {}", spacing.x, spacing.y, spacing.z,
+                                             label(stencil, mode));
+        const EngineRun run = runEngine(grid, seeds, makeOptions(stencil, mode));
+        expectCleanDelivery(run, what);
+        expectAllDelivered(run, what);
+        const ErrorStats s = oracle::compareToOracle(run.field, expected, unit);
+        report(what, grid, s, run.seconds);
+        if (mode == PropagationMode::kExact && stencil == StencilKind::kCubic26) {
+          EXPECT_LE(s.max_err_vox, 1e-5) << what << ": " << oracle::formatErrorStats(s, d.x, d.y);
+        }
+        if (mode == PropagationMode::kExact) {
+          EXPECT_LE(s.max_err_vox, 0.05) << what;
+        }
+      }
+  }
+}
+
+TEST(EngineExactness, VolumesOnAnisotropicVoxels) {
+  const Coord d{40, 36, 24};
+  const double spacing[3] = {0.5, 0.5, 1.5};
+  const Grid grid({0, 0, 0}, Vec3d{spacing[0], spacing[1], spacing[2]}, d);
+  const std::vector<uint8_t> mask = randomBlobs(d, 6, 99);
+  for (bool signed_distance : {false, true}) {
+    std::vector<double> expected;
+    if (signed_distance) {
+      expected = oracle::signedEdt(d.x, d.y, d.z, mask, spacing);
+    } else {
+      expected = oracle::edtSqr(d.x, d.y, d.z, mask, spacing);
+      for (double& x : expected) x = std::sqrt(x);
+    }
+    for (double& x : expected) x /= 0.5;  // voxels: units of the smallest spacing
+    const Seeds seeds = volumeSeeds(grid, mask, signed_distance);
+    const std::string what = fmt::format("anisotropic volume {} exact/cubic26", signed_distance ? "signed" : "unsigned");
+    const EngineRun run = runEngine(grid, seeds, makeOptions(StencilKind::kCubic26, PropagationMode::kExact));
+    expectCleanDelivery(run, what);
+    expectAllDelivered(run, what);
+    const ErrorStats s = oracle::compareToOracle(run.field, expected, 0.5);
+    report(what, grid, s, run.seconds);
+    EXPECT_LE(s.max_err_vox, 0.05) << what << ": " << oracle::formatErrorStats(s, d.x, d.y);
+  }
 }
 
 void checkVolumeExactness(bool signed_distance) {

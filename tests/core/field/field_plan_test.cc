@@ -239,6 +239,73 @@ TEST(FieldDefaultsTest, PlannerPicksTheSeparableEdtsOnlyWhereTheyDeliverTheSameF
   }
 }
 
+// Label volumes: the multi-label EDT and nearest labels are the separable EDT's, and the planner says so; anisotropic
+// volumes take it too; anisotropic meshes get cubic26 (fcc12's odd half assumes equal axes).
+TEST(FieldDefaultsTest, LabelsAndNearestLabelsAreTheSeparableEdtsAndSayWhatTheyCannotDo) {
+  const Grid cubic({0, 0, 0}, 1, {32, 32, 32});
+  const Grid aniso({0, 0, 0}, Vec3d{0.5, 0.5, 2.5}, {32, 32, 32});
+  FieldRequest r;
+  r.seeds = SeedKind::kVolume;
+  FieldPlan p;
+  ASSERT_TRUE(IsOk(planField(r, aniso, nullptr, &p)));
+  EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
+  r.labels = true;
+  r.black_border = true;
+  ASSERT_TRUE(IsOk(planField(r, cubic, nullptr, &p)));
+  EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
+  EXPECT_TRUE(p.volumeMeasure().labels);
+  EXPECT_TRUE(p.volumeMeasure().black_border);
+  EXPECT_FALSE(p.signedField());
+  EXPECT_NE(p.algorithmDescription().find("labels: each voxel"), std::string::npos);
+  const Status::Code kInvalid = Status::Code::kInvalidArgument;
+  auto refused = [&](const FieldRequest& req, const char* why) {
+    FieldPlan q;
+    EXPECT_TRUE(IsError(planField(req, cubic, nullptr, &q), kInvalid, why)) << why;
+  };
+  FieldRequest x = r;
+  x.stencil = StencilKind::kCubic26;
+  refused(x, "labels: only the separable EDT computes it");
+  x = r;
+  x.algorithm = FieldAlgorithm::kBand;
+  refused(x, "labels: only the separable EDT computes it");
+  x = r;
+  x.inside_negative = true;
+  refused(x, "labels: the multi-label EDT is unsigned");
+  x = r;
+  x.nearest_label = true;
+  refused(x, "labels: the multi-label EDT has no closest features");
+  x = FieldRequest{};
+  x.seeds = SeedKind::kVolume;
+  x.black_border = true;
+  refused(x, "black border: it applies to the multi-label EDT");
+  x = FieldRequest{};
+  x.seeds = SeedKind::kPoints;
+  x.nearest_label = true;
+  refused(x, "are for volume seeds");
+  x = FieldRequest{};
+  x.seeds = SeedKind::kVolume;
+  x.nearest_label = true;
+  ASSERT_TRUE(IsOk(planField(x, cubic, nullptr, &p)));
+  EXPECT_EQ(p.algorithm, FieldAlgorithm::kSeparable);
+  EXPECT_EQ(p.closestFeatureName(), "label");
+  EXPECT_TRUE(p.runOptions().closest_features);
+  x.closest_features = true;
+  refused(x, "nearest label and closest features exclude each other");
+  x.closest_features = false;
+  x.mode = PropagationMode::kPaper;
+  refused(x, "nearest label: only the separable EDT computes it");
+  // Meshes: fcc12 on cubic grids, cubic26 on anisotropic ones.
+  TriangleMesh tri{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}};
+  MeshReport report;
+  ASSERT_TRUE(IsOk(validateMesh(&tri, &report)));
+  FieldRequest m;
+  m.seeds = SeedKind::kMesh;
+  ASSERT_TRUE(IsOk(planField(m, cubic, &report, &p)));
+  EXPECT_EQ(p.stencil, StencilKind::kFcc12);
+  ASSERT_TRUE(IsOk(planField(m, aniso, &report, &p)));
+  EXPECT_EQ(p.stencil, StencilKind::kCubic26);
+}
+
 TEST(FieldDefaultsTest, AutoSignIsPseudonormalForClosedAndWindingForOpenMeshes) {
   MeshReport closed;
   std::string why;
@@ -352,7 +419,7 @@ TEST(FieldDefaultsTest, ClosestFeaturesGiveTheDeliveredDistance) {
   };
   for (bool signed_volume : {false, true}) {
     Seeds volume_seeds;
-    ASSERT_TRUE(IsOk(makeVolumeSeeds(grid, mask, signed_volume, &volume_seeds)));
+    ASSERT_TRUE(IsOk(makeVolumeSeeds(grid, LabelVolume::ofMask(grid.dims(), mask), signed_volume, &volume_seeds)));
     // Unsigned: the feature is a seed voxel. Signed: a voxel on the other side of the mask's boundary.
     check(volume_seeds, [&](int64_t id, const Coord& c) {
       EXPECT_EQ(mask[size_t(id)] != 0, signed_volume ? mask[size_t(grid.denseIndex(c))] == 0 : true);

@@ -110,10 +110,11 @@ TEST(NpyTest, MaskRoundTripAndLayout) {
   const std::string path = tempPath("mask.npy");
   ASSERT_TRUE(IsOk(writeNpyMask(path, mask, dims)));
   EXPECT_EQ(readBytes(path), lit(kNumpyU1V1) + std::string(mask.begin(), mask.end()));
-  std::vector<uint8_t> back;
-  Coord d;
-  ASSERT_TRUE(IsOk(readNpyMask(path, &back, &d)));
-  EXPECT_EQ(d, dims);
+  LabelVolume volume;
+  ASSERT_TRUE(IsOk(readNpyVolume(path, &volume)));
+  EXPECT_EQ(volume.dims(), dims);
+  EXPECT_EQ(volume.type(), VoxelType::kUint8);
+  const std::vector<uint8_t>& back = volume.bytes();
   EXPECT_EQ(back, mask);
   // Element [z][y][x] is voxel (x, y, z): x fastest.
   EXPECT_EQ(back[(1 * 3 + 2) * 4 + 3], 23);
@@ -125,11 +126,35 @@ TEST(NpyTest, BoolMasksAreAccepted) {
   std::string bytes = handMade("{'descr': '|b1', 'fortran_order': False, 'shape': (1, 2, 3), }", 0);
   bytes += std::string("\x00\x01\x00\x01\x01\x00", 6);
   writeBytes(path, bytes);
-  std::vector<uint8_t> m;
-  Coord d;
-  ASSERT_TRUE(IsOk(readNpyMask(path, &m, &d)));
-  EXPECT_EQ(d, (Coord{3, 2, 1}));
-  EXPECT_EQ(m, (std::vector<uint8_t>{0, 1, 0, 1, 1, 0}));
+  LabelVolume v;
+  ASSERT_TRUE(IsOk(readNpyVolume(path, &v)));
+  EXPECT_EQ(v.dims(), (Coord{3, 2, 1}));
+  EXPECT_EQ(v.bytes(), (std::vector<uint8_t>{0, 1, 0, 1, 1, 0}));
+  std::remove(path.c_str());
+}
+
+// Label volumes: uint16 and uint32 in either byte order, written back with the element type.
+TEST(NpyTest, LabelVolumesOfEveryWidthRoundTrip) {
+  const std::string path = tempPath("labels.npy");
+  for (VoxelType type : {VoxelType::kUint16, VoxelType::kUint32}) {
+    const size_t w = voxelTypeBytes(type);
+    std::vector<uint8_t> bytes(2 * 3 * 4 * w);
+    for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = uint8_t(i * 7 + 1);
+    const LabelVolume labels({4, 3, 2}, type, std::make_shared<const std::vector<uint8_t>>(bytes));
+    ASSERT_TRUE(IsOk(writeNpyVolume(path, labels)));
+    LabelVolume back;
+    ASSERT_TRUE(IsOk(readNpyVolume(path, &back)));
+    EXPECT_EQ(back.type(), type);
+    EXPECT_EQ(back.dims(), labels.dims());
+    EXPECT_EQ(back.bytes(), labels.bytes());
+    // The same values written big-endian read back alike.
+    std::vector<uint8_t> swapped = bytes;
+    for (size_t i = 0; i < swapped.size(); i += w) std::reverse(swapped.begin() + int64_t(i), swapped.begin() + int64_t(i + w));
+    writeBytes(path, encodeNpy(w == 2 ? ">u2" : ">u4", {2, 3, 4}, swapped.data(), swapped.size()));
+    ASSERT_TRUE(IsOk(readNpyVolume(path, &back)));
+    EXPECT_EQ(back.bytes(), labels.bytes());
+    EXPECT_EQ(back.at(5), labels.at(5));
+  }
   std::remove(path.c_str());
 }
 
@@ -263,9 +288,10 @@ TEST(NpyTest, WrongKindsOfArrayForAMaskOrAField) {
     std::string expect;
   };
   const std::vector<Case> cases = {
-      {"int32_mask", "{'descr': '<i4', 'fortran_order': False, 'shape': (2, 3, 4)}", 96, true, "uint8 or bool"},
-      {"float_mask", "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 3, 4)}", 96, true, "uint8 or bool"},
-      {"int8_mask", "{'descr': '|i1', 'fortran_order': False, 'shape': (2, 3, 4)}", 24, true, "uint8 or bool"},
+      {"int32_mask", "{'descr': '<i4', 'fortran_order': False, 'shape': (2, 3, 4)}", 96, true, "uint16 or uint32"},
+      {"float_mask", "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 3, 4)}", 96, true, "uint16 or uint32"},
+      {"int8_mask", "{'descr': '|i1', 'fortran_order': False, 'shape': (2, 3, 4)}", 24, true, "uint16 or uint32"},
+      {"u8_labels", "{'descr': '<u8', 'fortran_order': False, 'shape': (2, 3, 4)}", 192, true, "uint16 or uint32"},
       {"fortran_mask", "{'descr': '|u1', 'fortran_order': True, 'shape': (2, 3, 4)}", 24, true, "fortran_order"},
       {"2d_mask", "{'descr': '|u1', 'fortran_order': False, 'shape': (4, 6)}", 24, true, "3-D array"},
       {"4d_mask", "{'descr': '|u1', 'fortran_order': False, 'shape': (1, 2, 3, 4)}", 24, true, "3-D array"},
@@ -279,20 +305,19 @@ TEST(NpyTest, WrongKindsOfArrayForAMaskOrAField) {
   for (const Case& c : cases) {
     const std::string path = tempPath(c.name + ".npy");
     writeBytes(path, handMade(c.dict, c.payload));
-    std::vector<uint8_t> m{42};
+    LabelVolume m;
     std::vector<float> f{4.2f};
     Coord d{9, 9, 9};
-    const Status err = c.mask ? readNpyMask(path, &m, &d) : readNpyFloat32(path, &f, &d);
+    const Status err = c.mask ? readNpyVolume(path, &m) : readNpyFloat32(path, &f, &d);
     EXPECT_TRUE(IsError(err, kInvalid, c.expect)) << c.name;
     EXPECT_NE(err.message().find(path), std::string::npos) << c.name << ": got " << err.toString();
-    EXPECT_EQ(m, std::vector<uint8_t>{42}) << c.name << ": output touched on error";
+    EXPECT_FALSE(bool(m)) << c.name << ": output touched on error";
     EXPECT_EQ(d, (Coord{9, 9, 9})) << c.name;
     std::remove(path.c_str());
   }
-  std::vector<uint8_t> m;
-  Coord d;
+  LabelVolume m;
   const std::string missing = tempPath("does-not-exist.npy");
-  const Status err = readNpyMask(missing, &m, &d);
+  const Status err = readNpyVolume(missing, &m);
   EXPECT_TRUE(IsError(err, Status::Code::kNotFound, "cannot open"));
   EXPECT_NE(err.message().find(missing), std::string::npos) << err.toString();
 }

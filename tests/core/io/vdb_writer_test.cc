@@ -142,6 +142,33 @@ std::vector<Brick> randomBricks(unsigned seed) {
   return bricks;
 }
 
+// An anisotropic grid: OpenVDB reads back each axis's voxel size and the world position of every voxel.
+TEST(VdbWriterTest, AnisotropicSpacingIsTheTransformsScale) {
+  const Grid grid({-1.5, 2.0, 0.25}, Vec3d{0.7, 0.7, 2.5}, {20, 18, 9});
+  VdbFieldBuilder builder(grid, 2.0f);
+  Brick b;
+  b.origin = {8, 8, 0};
+  for (int i = 0; i < kBrickVoxels; i += 3) {
+    b.values[i] = 0.5f;
+    b.mask.set(i);
+  }
+  builder.add(b);
+  const fs::path path = fs::temp_directory_path() / ("distband_vdb_aniso_" + std::to_string(::getpid()) + ".vdb");
+  ASSERT_TRUE(IsOk(builder.write(path.string())));
+  openvdb::FloatGrid::Ptr vdb;
+  ASSERT_EQ(readVdb(path.string(), &vdb), "");
+  fs::remove(path);
+  EXPECT_NEAR(vdb->voxelSize()[0], 0.7, 1e-12);
+  EXPECT_NEAR(vdb->voxelSize()[1], 0.7, 1e-12);
+  EXPECT_NEAR(vdb->voxelSize()[2], 2.5, 1e-12);
+  EXPECT_FALSE(vdb->hasUniformVoxels());
+  const openvdb::Vec3d w = vdb->indexToWorld(openvdb::Coord(2, 3, 4));
+  EXPECT_NEAR(w.x(), -1.5 + 2 * 0.7, 1e-12);
+  EXPECT_NEAR(w.y(), 2.0 + 3 * 0.7, 1e-12);
+  EXPECT_NEAR(w.z(), 0.25 + 4 * 2.5, 1e-12);
+  EXPECT_EQ(vdb->activeVoxelCount(), openvdb::Index64(b.mask.count()));
+}
+
 TEST(VdbWriterTest, MatchesOpenVdbsOwnFloodFilledTreeBitForBit) {
   const float background = 3.f;
   const Grid grid({0.5, -1, 2}, 0.25, {12300, 12300, 12300});

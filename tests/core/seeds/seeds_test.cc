@@ -91,7 +91,7 @@ TEST(VolumeSeedsTest, UnsignedBandIsTheMaskWithSitesOnItsBoundary) {
   const Grid g({0, 0, 0}, 1.0, d);
   const std::vector<uint8_t> mask = cubeMask(d, 3, 6);  // 4^3 = 64 voxels, 2^3 = 8 interior
   Seeds s;
-  ASSERT_TRUE(IsOk(makeVolumeSeeds(g, mask, false, &s)));
+  ASSERT_TRUE(IsOk(makeVolumeSeeds(g, LabelVolume::ofMask(d, mask), false, &s)));
   EXPECT_EQ(s.kind, SiteKind::kPoint);
   EXPECT_EQ(s.band.size(), 64u);
   EXPECT_EQ(s.points.size(), 56u);
@@ -121,7 +121,7 @@ TEST(VolumeSeedsTest, SignedBandStraddlesTheBoundary) {
   const Grid g({0, 0, 0}, 1.0, d);
   const std::vector<uint8_t> mask = cubeMask(d, 3, 6);
   Seeds s;
-  ASSERT_TRUE(IsOk(makeVolumeSeeds(g, mask, true, &s)));
+  ASSERT_TRUE(IsOk(makeVolumeSeeds(g, LabelVolume::ofMask(d, mask), true, &s)));
   ASSERT_NE(s.region, nullptr);
   ASSERT_EQ(s.region->size(), mask.size());
   for (size_t i = 0; i < mask.size(); ++i) EXPECT_EQ((*s.region)[i] != 0, mask[i] != 0);
@@ -162,33 +162,61 @@ TEST(VolumeSeedsTest, Errors) {
   Seeds s;
   s.points = {{1, 2, 3}};
   constexpr Status::Code kInvalid = Status::Code::kInvalidArgument;
-  EXPECT_TRUE(IsError(makeVolumeSeeds(g, std::vector<uint8_t>(10, 1), false, &s), kInvalid, "mask has 10 voxels"));
-  EXPECT_TRUE(IsError(makeVolumeSeeds(g, std::vector<uint8_t>(216, 0), false, &s), kInvalid, "no nonzero voxel"));
-  EXPECT_TRUE(IsError(makeVolumeSeeds(g, std::vector<uint8_t>(216, 0), true, &s), kInvalid, "no nonzero voxel"));
-  EXPECT_TRUE(IsError(makeVolumeSeeds(g, std::vector<uint8_t>(216, 7), true, &s), kInvalid, "no zero voxel"));
-  EXPECT_TRUE(IsOk(makeVolumeSeeds(g, std::vector<uint8_t>(216, 7), false, &s)));  // full mask: all zero
+  EXPECT_TRUE(IsError(makeVolumeSeeds(g, LabelVolume::ofMask({10, 1, 1}, std::vector<uint8_t>(10, 1)), false, &s), kInvalid,
+                      "the volume has 10 voxels, the grid 216"));
+  EXPECT_TRUE(IsError(makeVolumeSeeds(g, LabelVolume::ofMask(d, std::vector<uint8_t>(216, 0)), false, &s), kInvalid, "no nonzero voxel"));
+  EXPECT_TRUE(IsError(makeVolumeSeeds(g, LabelVolume::ofMask(d, std::vector<uint8_t>(216, 0)), true, &s), kInvalid, "no nonzero voxel"));
+  EXPECT_TRUE(IsError(makeVolumeSeeds(g, LabelVolume::ofMask(d, std::vector<uint8_t>(216, 7)), true, &s), kInvalid, "no zero voxel"));
+  EXPECT_TRUE(IsOk(makeVolumeSeeds(g, LabelVolume::ofMask(d, std::vector<uint8_t>(216, 7)), false, &s)));  // full mask: all zero
   s.points = {{1, 2, 3}};
-  EXPECT_TRUE(IsError(makeVolumeSeeds(g, std::vector<uint8_t>(217, 1), true, &s), kInvalid, "mask has 217 voxels"));
+  EXPECT_TRUE(IsError(makeVolumeSeeds(g, LabelVolume::ofMask({217, 1, 1}, std::vector<uint8_t>(217, 1)), true, &s), kInvalid,
+                      "the volume has 217 voxels"));
   ASSERT_EQ(s.points.size(), 1u) << "output must be untouched on error";
 }
 
-// checkSeedMask scans in word steps and parallel slices: a lone seed (or a lone zero) anywhere, at any size, counts.
-TEST(VolumeSeedsTest, CheckSeedMaskFindsALoneVoxelAnywhere) {
-  for (size_t size : {size_t(1), size_t(7), size_t(8), size_t(9), size_t(1) << 20, (size_t(3) << 20) + 5}) {
-    for (size_t at : {size_t(0), size / 2, size - 1}) {
-      std::vector<uint8_t> mask(size, 0);
-      EXPECT_TRUE(IsError(checkSeedMask(mask, false), Status::Code::kInvalidArgument, "no nonzero voxel")) << size;
-      mask[at] = 200;
-      EXPECT_TRUE(IsOk(checkSeedMask(mask, false))) << size << " " << at;
-      std::vector<uint8_t> full(size, 1);
-      EXPECT_TRUE(IsError(checkSeedMask(full, true), Status::Code::kInvalidArgument, "no zero voxel")) << size;
-      full[at] = 0;
-      if (size > 1)
-        EXPECT_TRUE(IsOk(checkSeedMask(full, true))) << size << " " << at;
-      else
-        EXPECT_TRUE(IsError(checkSeedMask(full, false), Status::Code::kInvalidArgument, "no nonzero voxel"));
+// checkVolumeMeasure scans in word steps and parallel slices: a lone seed (or a lone zero) anywhere, at any size and
+// element width, counts.
+TEST(VolumeSeedsTest, CheckVolumeMeasureFindsALoneVoxelAnywhere) {
+  const VolumeMeasure unsigned_field{}, signed_field{false, true, false};
+  for (VoxelType type : kVoxelTypes)
+    for (size_t size : {size_t(1), size_t(7), size_t(8), size_t(9), size_t(1) << 20, (size_t(3) << 20) + 5}) {
+      const size_t w = voxelTypeBytes(type);
+      auto volume = [&](uint8_t fill, size_t at, uint8_t value) {
+        std::vector<uint8_t> bytes(size * w, fill);
+        if (at < size) std::fill_n(bytes.begin() + int64_t(at * w), w, value);
+        if (at < size && value) bytes[at * w + w - 1] = value;  // a nonzero element whose low bytes may be zero
+        return LabelVolume({int(size), 1, 1}, type, std::make_shared<const std::vector<uint8_t>>(std::move(bytes)));
+      };
+      for (size_t at : {size_t(0), size / 2, size - 1}) {
+        EXPECT_TRUE(IsError(checkVolumeMeasure(volume(0, size, 0), unsigned_field), Status::Code::kInvalidArgument,
+                            "no nonzero voxel"))
+            << size;
+        EXPECT_TRUE(IsOk(checkVolumeMeasure(volume(0, at, 200), unsigned_field))) << size << " " << at;
+        EXPECT_TRUE(IsError(checkVolumeMeasure(volume(1, size, 0), signed_field), Status::Code::kInvalidArgument,
+                            "no zero voxel"))
+            << size;
+        if (size > 1)
+          EXPECT_TRUE(IsOk(checkVolumeMeasure(volume(1, at, 0), signed_field))) << size << " " << at;
+        else
+          EXPECT_TRUE(IsError(checkVolumeMeasure(volume(1, at, 0), unsigned_field), Status::Code::kInvalidArgument,
+                              "no nonzero voxel"));
+      }
     }
-  }
+  // The multi-label EDT: two labels, or a black border.
+  const LabelVolume one({4, 1, 1}, VoxelType::kUint16, std::make_shared<const std::vector<uint8_t>>(8, 3));
+  EXPECT_TRUE(
+      IsError(checkVolumeMeasure(one, {true, false, 0}), Status::Code::kInvalidArgument, "every voxel has label 771"));
+  // All background: every distance is 0.
+  EXPECT_TRUE(IsOk(
+      checkVolumeMeasure(LabelVolume({4, 1, 1}, VoxelType::kUint16, std::make_shared<const std::vector<uint8_t>>(8, 0)),
+                         {true, false, 0})));
+  EXPECT_TRUE(IsOk(checkVolumeMeasure(one, {true, false, kAllFaces})));
+  EXPECT_TRUE(IsOk(checkVolumeMeasure(one, {true, false, 0x4})));  // a tile's one face on the grid's
+  std::vector<uint8_t> two(8, 3);
+  two[6] = 4;
+  EXPECT_TRUE(IsOk(
+      checkVolumeMeasure(LabelVolume({4, 1, 1}, VoxelType::kUint16, std::make_shared<const std::vector<uint8_t>>(two)),
+                         {true, false, 0})));
 }
 
 TEST(VolumeSeedsTest, NonzeroValuesOtherThanOneCount) {
@@ -197,7 +225,7 @@ TEST(VolumeSeedsTest, NonzeroValuesOtherThanOneCount) {
   std::vector<uint8_t> mask(216, 0);
   mask[g.denseIndex({2, 2, 2})] = 255;
   Seeds s;
-  ASSERT_TRUE(IsOk(makeVolumeSeeds(g, mask, false, &s)));
+  ASSERT_TRUE(IsOk(makeVolumeSeeds(g, LabelVolume::ofMask(d, mask), false, &s)));
   ASSERT_EQ(s.band.size(), 1u);
   EXPECT_EQ(s.band[0].voxel, (Coord{2, 2, 2}));
 }

@@ -87,6 +87,38 @@ TEST(SeparablePointsTest, MatchesBruteForceAndTheBandBitForBitWithSegmentsChunks
   }
 }
 
+// Anisotropic voxels: world distances against brute force with the same spacing, and bit for bit the band's values.
+TEST(SeparablePointsTest, OnAnisotropicVoxelsMatchesBruteForceAndTheBand) {
+  const Coord d{33, 27, 19};
+  const Vec3d spacing{0.5, 0.75, 2.0};
+  const Grid grid({1, -2, 0.5}, spacing, d);
+  std::vector<Vec3d> world;
+  std::vector<std::array<double, 3>> index;
+  for (const Vec3d& p : awkwardPoints(4)) {
+    world.push_back({1 + spacing.x * p.x, -2 + spacing.y * p.y, 0.5 + spacing.z * p.z});
+    index.push_back({p.x, p.y, p.z});
+  }
+  Seeds seeds;
+  ASSERT_TRUE(IsOk(makePointSeeds(grid, world, &seeds)));
+  const std::vector<double> exact2 =
+      oracle::bruteForceDistanceSqr(d.x, d.y, d.z, index, {spacing.x, spacing.y, spacing.z});
+  BandOptions o;
+  o.segment_length_world = 3;
+  o.closest_features = true;
+  const CollectedField c = runSeparable(grid, seeds, o);
+  const CollectedField band = runBand(grid, seeds, o);
+  EXPECT_EQ(c.order_error, "");
+  int64_t wrong = 0, not_once = 0, unlike_band = 0;
+  for (size_t i = 0; i < exact2.size(); ++i) {
+    not_once += c.times_delivered[i] != 1;
+    wrong += std::abs(double(c.values[i]) - std::sqrt(exact2[i])) > 1e-6 * (1 + std::sqrt(exact2[i]));
+    unlike_band += std::memcmp(&c.values[i], &band.values[i], sizeof(float)) != 0;
+  }
+  EXPECT_EQ(not_once, 0);
+  EXPECT_EQ(wrong, 0);
+  EXPECT_EQ(unlike_band, 0);
+}
+
 TEST(SeparablePointsTest, IdenticalForAnyThreadCountEqualOnATileAndStoppedByItsInterrupter) {
   const Coord d{70, 52, 41};
   const Grid grid({0, 0, 0}, 1, d);

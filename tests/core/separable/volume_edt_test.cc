@@ -1,8 +1,11 @@
-// Tests for core/separable_edt: the whole-grid volume field against the exact EDT oracle (tests/support/exact_edt,
-// which shares no code with core/), streamed under the band engine's contract (segments nearest first, each voxel
-// once, bricks sorted, chunks), identical for any thread count, stopped by its interrupter. The planner's choice of
-// it: tests/core/field/field_plan_test.cc.
+// Tests for core/separable/volume_edt: the seed field against the exact EDT oracle (tests/support/exact_edt, which
+// shares no code with core/), cubic and with per-axis spacing, for every element type; the multi-label EDT and the
+// nearest labels against brute force (tests/support/brute_force); streamed under the band engine's contract (segments
+// nearest first, each voxel once, bricks sorted, chunks), identical for any thread count, stopped by its interrupter.
+// The planner's choice of it: tests/core/field/field_plan_test.cc.
+#include <array>
 #include <cmath>
+#include <limits>
 #include <cstring>
 #include <random>
 #include <vector>
@@ -11,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "core/separable/volume_edt.h"
+#include "tests/support/brute_force.h"
 #include "tests/support/exact_edt.h"
 #include "tests/support/segment_collector.h"
 
@@ -34,10 +38,14 @@ std::vector<uint8_t> randomBlobs(const Coord& d, int count, uint64_t seed) {
 
 using Collected = CollectedField;
 
-Collected run(const Grid& grid, const std::vector<uint8_t>& mask, bool inside_negative, const BandOptions& o) {
+Collected run(const Grid& grid, const LabelVolume& volume, const VolumeMeasure& measure, const BandOptions& o) {
   return collectSegments(grid, o, [&](const SegmentCallback& on_segment) {
-    return computeSeparableVolumeField(grid, mask, inside_negative, o, on_segment);
+    return computeSeparableVolumeField(grid, volume, measure, o, on_segment);
   });
+}
+
+Collected run(const Grid& grid, const std::vector<uint8_t>& mask, bool inside_negative, const BandOptions& o) {
+  return run(grid, LabelVolume::ofMask(grid.dims(), mask), {false, inside_negative, false}, o);
 }
 
 TEST(SeparableEdtTest, MatchesTheExactEdtUnsignedAndSignedWithSegmentsAndChunks) {
@@ -167,11 +175,210 @@ TEST(SeparableEdtTest, WithALimitIdenticalForAnyThreadCountAndStoppable) {
   expectIdenticalForAnyThreadCountAndStoppable(Grid({0, 0, 0}, 1, d), blobsAndBox(d, 9), o, 10000);
 }
 
-TEST(SeparableEdtTest, RejectsMasksItCannotMeasure) {
+TEST(SeparableEdtTest, RejectsVolumesItCannotMeasure) {
   const Grid grid({0, 0, 0}, 1, {8, 8, 8});
-  EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(512, 0), false, {}, {}), std::invalid_argument);
-  EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(512, 1), true, {}, {}), std::invalid_argument);
-  EXPECT_THROW(computeSeparableVolumeField(grid, std::vector<uint8_t>(100, 1), false, {}, {}), std::invalid_argument);
+  auto mask = [](size_t n, uint8_t fill) { return LabelVolume::ofMask({int(n), 1, 1}, std::vector<uint8_t>(n, fill)); };
+  auto cube = [](uint8_t fill) { return LabelVolume::ofMask({8, 8, 8}, std::vector<uint8_t>(512, fill)); };
+  EXPECT_THROW(computeSeparableVolumeField(grid, cube(0), {}, {}, {}), std::invalid_argument);
+  EXPECT_THROW(computeSeparableVolumeField(grid, cube(1), {false, true, false}, {}, {}), std::invalid_argument);
+  EXPECT_THROW(computeSeparableVolumeField(grid, mask(100, 1), {}, {}, {}), std::invalid_argument);
+  EXPECT_THROW(computeSeparableVolumeField(grid, cube(3), {true, false, 0}, {}, {}), std::invalid_argument);
+  FieldRunOptions closest;
+  closest.closest_features = true;
+  EXPECT_THROW(computeSeparableVolumeField(grid, cube(3), {true, false, kAllFaces}, closest, {}),
+               std::invalid_argument);
+  EXPECT_NO_THROW(computeSeparableVolumeField(grid, cube(3), {true, false, kAllFaces}, {}, {}));
+}
+
+// ---- Anisotropic voxels, label volumes, the multi-label EDT and nearest labels ----
+
+/// Blobs labelled 1..count (later ones over earlier ones), background 0.
+std::vector<uint32_t> labelBlobs(const Coord& d, int count, double r_min, double r_max, uint64_t seed) {
+  std::vector<uint32_t> labels(size_t(d.x) * d.y * d.z, 0);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> ux(0, d.x), uy(0, d.y), uz(0, d.z), ur(r_min, r_max);
+  for (int i = 0; i < count; ++i) {
+    const double cx = ux(rng), cy = uy(rng), cz = uz(rng), r = ur(rng);
+    for (int z = 0; z < d.z; ++z)
+      for (int y = 0; y < d.y; ++y)
+        for (int x = 0; x < d.x; ++x)
+          if ((x - cx) * (x - cx) + (y - cy) * (y - cy) + (z - cz) * (z - cz) <= r * r)
+            labels[(size_t(z) * d.y + y) * d.x + x] = uint32_t(i + 1);
+  }
+  return labels;
+}
+
+LabelVolume asVolume(const Coord& d, const std::vector<uint32_t>& labels, VoxelType type) {
+  const size_t w = voxelTypeBytes(type);
+  auto bytes = std::make_shared<std::vector<uint8_t>>(labels.size() * w);
+  for (size_t i = 0; i < labels.size(); ++i) std::memcpy(bytes->data() + i * w, &labels[i], w);  // little-endian
+  return LabelVolume(d, type, bytes);
+}
+
+std::array<double, 3> spacingOf(const Grid& g) { return {g.spacing().x, g.spacing().y, g.spacing().z}; }
+
+// The seed field on anisotropic voxels, whole grid and within limits, signed and unsigned, against the exact EDT with
+// the same spacing (scipy's `sampling`), for every element type.
+TEST(SeparableEdtTest, AnisotropicSeedFieldMatchesTheExactEdtWithSpacing) {
+  const Coord d{37, 30, 21};
+  const Grid grid({1, -2, 0.5}, Vec3d{0.5, 0.5, 2.5}, d);
+  const std::vector<uint32_t> labels = labelBlobs(d, 7, 1.5, 6, 5);
+  std::vector<uint8_t> mask(labels.size());
+  for (size_t i = 0; i < labels.size(); ++i) mask[i] = labels[i] != 0;
+  const double spacing[3] = {0.5, 0.5, 2.5};
+  const std::vector<double> exact2 = oracle::edtSqr(d.x, d.y, d.z, mask, spacing);
+  const std::vector<double> signed_exact = oracle::signedEdt(d.x, d.y, d.z, mask, spacing);
+  for (VoxelType type : kVoxelTypes)
+    for (double limit : {std::numeric_limits<double>::infinity(), 1.3, 4.9})
+      for (bool inside_negative : {false, true}) {
+        BandOptions o;
+        o.limit_world = limit;
+        o.segment_length_world = 1.1;
+        o.max_chunk_bricks = 9;
+        const Collected c = run(grid, asVolume(d, labels, type), {false, inside_negative, false}, o);
+        const std::string where = fmt::format("{} limit {} signed {}", voxelTypeName(type), limit, inside_negative);
+        EXPECT_EQ(c.order_error, "") << where;
+        int64_t wrong = 0, missing = 0, extra = 0;
+        for (size_t i = 0; i < c.values.size(); ++i) {
+          const double want = inside_negative ? signed_exact[i] : std::sqrt(exact2[i]);
+          if (std::abs(want) > limit * (1 + 1e-6)) {
+            extra += c.times_delivered[i] != 0;
+            continue;
+          }
+          if (std::abs(want) > limit * (1 - 1e-6)) continue;  // on the limit: float rounding decides
+          missing += c.times_delivered[i] != 1;
+          wrong += c.times_delivered[i] == 1 && std::abs(c.values[i] - want) > 1e-5 * (1 + std::abs(want));
+        }
+        EXPECT_EQ(missing, 0) << where;
+        EXPECT_EQ(extra, 0) << where;
+        EXPECT_EQ(wrong, 0) << where;
+      }
+}
+
+// The multi-label EDT (seung-lab edt's edt::edt semantics) against brute force: a voxel of label L != 0 measured to
+// the nearest voxel of another label (the black border: the grid's outside is label 0), label 0 at 0 — few large
+// labels, many small ones, noise (every voxel its own run), cubic and anisotropic, whole grid and within limits.
+TEST(SeparableEdtTest, MultiLabelEdtMatchesBruteForce) {
+  const Coord d{23, 19, 14};
+  std::mt19937_64 rng(3);
+  std::vector<uint32_t> noise(size_t(d.x) * d.y * d.z);
+  for (uint32_t& v : noise) v = uint32_t(rng() % 5);
+  const std::vector<std::pair<std::string, std::vector<uint32_t>>> volumes = {
+      {"2 labels", labelBlobs(d, 2, 5, 9, 1)},
+      {"30 labels", labelBlobs(d, 30, 2, 5, 2)},
+      {"noise", noise},
+  };
+  std::vector<uint32_t> no_zero = labelBlobs(d, 9, 3, 7, 4);  // no background: every voxel some label
+  for (uint32_t& v : no_zero) v += 1;
+  for (const Vec3d& spacing : {Vec3d{1, 1, 1}, Vec3d{0.5, 0.5, 2.5}, Vec3d{1.2, 0.7, 0.9}}) {
+    const Grid grid({0, 0, 0}, spacing, d);
+    for (const auto& [name, labels] : volumes)
+      for (bool black : {false, true}) {
+        const std::vector<double> exact = oracle::otherLabelDistance(d.x, d.y, d.z, labels, spacingOf(grid), black);
+        for (double limit : {std::numeric_limits<double>::infinity(), 1.7, 3.1}) {
+          BandOptions o;
+          o.limit_world = limit;
+          o.segment_length_world = limit > 3 ? 0.0 : 0.6;
+          const VoxelType type = name == "noise" ? VoxelType::kUint8 : VoxelType::kUint16;
+          const Collected c = run(grid, asVolume(d, labels, type), {true, false, black ? kAllFaces : uint8_t(0)}, o);
+          const std::string where = fmt::format("{} spacing {},{},{} black {} limit {}", name, spacing.x, spacing.y,
+                                                spacing.z, black, limit);
+          EXPECT_EQ(c.order_error, "") << where;
+          int64_t wrong = 0, missing = 0, extra = 0;
+          for (size_t i = 0; i < c.values.size(); ++i) {
+            const double want = exact[i];
+            if (want > limit * (1 + 1e-6)) {
+              extra += c.times_delivered[i] != 0;
+              continue;
+            }
+            if (want > limit * (1 - 1e-6)) continue;
+            missing += c.times_delivered[i] != 1;
+            if (c.times_delivered[i] == 1 && std::abs(c.values[i] - want) > 1e-5 * (1 + want) && wrong++ == 0)
+              ADD_FAILURE() << where << ": voxel " << i << " (label " << labels[i] << ") got " << c.values[i]
+                            << ", want " << want;
+          }
+          EXPECT_EQ(missing, 0) << where;
+          EXPECT_EQ(extra, 0) << where;
+          EXPECT_EQ(wrong, 0) << where;
+        }
+      }
+    // Every voxel labelled: without a black border the distances are to other labels only.
+    const std::vector<double> exact = oracle::otherLabelDistance(d.x, d.y, d.z, no_zero, spacingOf(grid), false);
+    const Collected c = run(grid, asVolume(d, no_zero, VoxelType::kUint32), {true, false, 0}, {});
+    int64_t wrong = 0;
+    for (size_t i = 0; i < c.values.size(); ++i) wrong += std::abs(c.values[i] - exact[i]) > 1e-5 * (1 + exact[i]);
+    EXPECT_EQ(wrong, 0) << "no background, spacing " << spacing.x << "," << spacing.y << "," << spacing.z;
+  }
+}
+
+// Nearest labels: each voxel's nearest seed's label (scipy's return_indices looked up in the volume), wherever the
+// nearest seed is unique; the distances unchanged; signed fields too; whole grid and within a limit.
+TEST(SeparableEdtTest, NearestLabelsMatchBruteForceWhereTheNearestSeedIsUnique) {
+  const Coord d{26, 21, 17};
+  std::vector<uint32_t> labels(size_t(d.x) * d.y * d.z, 0);
+  std::mt19937_64 rng(8);
+  for (int i = 0; i < 60; ++i) labels[rng() % labels.size()] = uint32_t(1 + rng() % 40000);
+  const std::vector<uint32_t> blobs = labelBlobs(d, 6, 1.5, 4, 9);
+  for (size_t i = 0; i < labels.size(); ++i)
+    if (blobs[i]) labels[i] = 50000 + blobs[i];
+  for (const Vec3d& spacing : {Vec3d{1, 1, 1}, Vec3d{0.7, 0.7, 2.5}}) {
+    const Grid grid({0, 0, 0}, spacing, d);
+    std::vector<uint32_t> nearest;
+    std::vector<bool> unique;
+    oracle::nearestSeedLabel(d.x, d.y, d.z, labels, spacingOf(grid), &nearest, &unique);
+    for (double limit : {std::numeric_limits<double>::infinity(), 2.2})
+      for (bool inside_negative : {false, true}) {
+        BandOptions o;
+        o.limit_world = limit;
+        o.closest_features = true;
+        o.segment_length_world = 0.9;
+        const Collected c = run(grid, asVolume(d, labels, VoxelType::kUint32), {false, inside_negative, false}, o);
+        const std::string where = fmt::format("spacing {},{},{} limit {} signed {}", spacing.x, spacing.y, spacing.z,
+                                              limit, inside_negative);
+        EXPECT_EQ(c.order_error, "") << where;
+        int64_t wrong = 0, checked = 0;
+        for (size_t i = 0; i < c.values.size(); ++i) {
+          if (c.times_delivered[i] != 1) continue;
+          if (labels[i] != 0) {
+            wrong += c.closest[i] != int64_t(labels[i]);  // a seed is its own nearest
+            continue;
+          }
+          if (!unique[i]) continue;
+          ++checked;
+          if (c.closest[i] != int64_t(nearest[i]) && wrong++ == 0)
+            ADD_FAILURE() << where << ": voxel " << i << " got label " << c.closest[i] << ", want " << nearest[i];
+        }
+        EXPECT_EQ(wrong, 0) << where;
+        EXPECT_GT(checked, 1000) << where;
+      }
+  }
+}
+
+TEST(SeparableEdtTest, LabelsIdenticalForAnyThreadCountAndStoppable) {
+  const Coord d{70, 66, 52};
+  const Grid grid({0, 0, 0}, Vec3d{0.5, 0.5, 1.5}, d);
+  const LabelVolume labels = asVolume(d, labelBlobs(d, 40, 3, 9, 12), VoxelType::kUint16);
+  for (double limit : {std::numeric_limits<double>::infinity(), 2.5})
+    for (bool multi : {true, false}) {
+      BandOptions o;
+      o.limit_world = limit;
+      o.segment_length_world = 1;
+      o.closest_features = !multi;
+      const VolumeMeasure m{multi, false, multi ? kAllFaces : uint8_t(0)};
+      o.threads = 1;
+      const Collected one = run(grid, labels, m, o);
+      o.threads = 2;
+      const Collected two = run(grid, labels, m, o);
+      EXPECT_GT(one.result.voxels, 10000);
+      EXPECT_EQ(std::memcmp(one.values.data(), two.values.data(), one.values.size() * sizeof(float)), 0);
+      EXPECT_EQ(one.closest, two.closest);
+      Interrupter stop;
+      stop.cancel(Status::Code::kCancelled, "test");
+      o.interrupter = &stop;
+      const Collected stopped = run(grid, labels, m, o);
+      EXPECT_TRUE(stopped.result.interrupted);
+      EXPECT_EQ(stopped.result.voxels, 0);
+    }
 }
 
 }  // namespace

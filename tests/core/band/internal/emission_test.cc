@@ -34,7 +34,7 @@ void touch(BandState& s, const std::vector<Coord>& voxels) {
   for (const Coord& c : voxels) {
     const uint32_t id = s.brickIdOf(c);
     BrickState* b = s.table.getOrCreate(id, &tb.bricks);
-    offer(s, b, id, brickOffset(c.x & 7, c.y & 7, c.z & 7), packKey(s.metric.key2(0, c.x, c.y, c.z), kNoDirection, 0),
+    offer(s, b, id, brickOffset(c.x & 7, c.y & 7, c.z & 7), packKey(s.metric.key2(0, s.metric.unitsOf(c)), kNoDirection, 0),
           false, tb);
   }
 }

@@ -30,7 +30,7 @@ size_t indexOf(const Stencil& s, const Coord& v) {
 TEST(LinkTables, CountsPerArrivalDirection) {
   const Stencil& c6 = Stencil::get(StencilKind::kCubic6);
   const Stencil& c26 = Stencil::get(StencilKind::kCubic26);
-  const LinkTables t6(c6), t26(c26);
+  const LinkTables t6(c6, Vec3d{1, 1, 1}), t26(c26, Vec3d{1, 1, 1});
   const Coord interior{3, 4, 5};
   EXPECT_EQ(t6.linksFor(interior, kNoDirection).size(), 6u);
   EXPECT_EQ(t26.linksFor(interior, kNoDirection).size(), 26u);
@@ -48,7 +48,7 @@ TEST(LinkTables, CountsPerArrivalDirection) {
 TEST(LinkTables, TargetsAreLocatedRightFromEveryPositionInTheBrick) {
   for (StencilKind kind : kAll) {
     const Stencil& s = Stencil::get(kind);
-    const LinkTables t(s);
+    const LinkTables t(s, Vec3d{1, 1, 1});
     for (int off = 0; off < kBrickVoxels; ++off) {
       const Coord l = brickLocal(off);
       for (uint32_t dir = 0; dir < 32; ++dir) {
@@ -70,7 +70,7 @@ TEST(LinkTables, TargetsAreLocatedRightFromEveryPositionInTheBrick) {
 TEST(LinkTables, EveryDroppedLinkIsRedundantAndEveryKeptOneIsNot) {
   for (StencilKind kind : kAll) {
     const Stencil& s = Stencil::get(kind);
-    const LinkTables t(s);
+    const LinkTables t(s, Vec3d{1, 1, 1});
     EXPECT_EQ(t.all().size(), s.links.size());
     for (uint32_t dir = 0; dir < s.links.size(); ++dir) {
       const Coord u = s.links[dir];
@@ -92,7 +92,7 @@ TEST(LinkTables, EveryDroppedLinkIsRedundantAndEveryKeptOneIsNot) {
 // A small vector propagation (one thread, point sites, Jacobi steps from a front of changed voxels as the engine
 // runs them) with every link, and with the tables' links: dropping the links gives the same field.
 std::vector<uint64_t> propagate(const Stencil& s, const LinkTables* tables, const std::vector<Vec3d>& sites, int n) {
-  const LinkTables every(s);
+  const LinkTables every(s, Vec3d{1, 1, 1});
   std::vector<uint64_t> key(size_t(n) * n * n, kUntouched);
   auto index = [n](const Coord& c) { return (size_t(c.z) * n + c.y) * n + c.x; };
   auto d2Of = [&](uint32_t site, const Coord& c) {
@@ -146,7 +146,7 @@ TEST(LinkTables, PropagationWithTheTablesMatchesPropagationWithEveryLink) {
   for (int i = 0; i < 12; ++i) sites.push_back({u(rng), u(rng), u(rng)});
   for (StencilKind kind : kAll) {
     const Stencil& s = Stencil::get(kind);
-    const LinkTables tables(s);
+    const LinkTables tables(s, Vec3d{1, 1, 1});
     const std::vector<uint64_t> full = propagate(s, nullptr, sites, 20), pruned = propagate(s, &tables, sites, 20);
     ASSERT_EQ(full.size(), pruned.size());
     size_t differ = 0;

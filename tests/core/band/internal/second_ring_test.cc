@@ -24,7 +24,7 @@ void put(BandState& s, const Coord& c, uint32_t site) {
   const uint32_t id = s.brickIdOf(c);
   BrickState* b = s.table.getOrCreate(id, &tb.bricks);
   const uint32_t ks = toKeySite(site);
-  b->key[brickOffset(c.x & 7, c.y & 7, c.z & 7)].store(packKey(s.metric.key2(ks, c.x, c.y, c.z), kNoDirection, ks));
+  b->key[brickOffset(c.x & 7, c.y & 7, c.z & 7)].store(packKey(s.metric.key2(ks, s.metric.unitsOf(c)), kNoDirection, ks));
 }
 
 Seeds pointSeeds(std::vector<Vec3d> points) {
