@@ -5,6 +5,7 @@
 #include <csignal>
 #include <exception>
 
+#include "client/at_command.h"
 #include "client/compute_command.h"
 #ifdef DISTBAND_WITH_SERVICE
 #include "client/remote_commands.h"
@@ -26,8 +27,22 @@ std::vector<CliCommand> registerAllCommands(CLI::App& app, const CliContext& con
   std::vector<CliCommand> commands;
   commands.push_back(registerComputeCommand(app, context));
 #ifdef DISTBAND_WITH_SERVICE
+  commands.push_back(registerAtCommand(app, context, remoteAt()));
   for (CliCommand& c : registerRemoteCommands(app, context)) commands.push_back(std::move(c));
 #else
+  // `at` runs in-process here; with --server the front binary hands it to distband-remote before parsing, so --server
+  // is registered only for the help (a build without the service refuses it).
+  AtRemote local;
+  local.add_flags = [](CLI::App* cmd) {
+    cmd->add_option_function<std::string>(
+        "--server", [](const std::string&) {}, "Run on a distband server HOST:PORT (the service client's flags apply)");
+  };
+  local.run = [](const AtArgs&, const CliContext& ctx) {
+    ctx.err << "distband at: --server needs the service client (built with DISTBAND_BUILD_SERVICE=OFF, or "
+            << "distband-remote is missing beside distband)\n";
+    return kExitUsage;
+  };
+  commands.push_back(registerAtCommand(app, context, std::move(local)));
   // Without the service compiled in (the front `distband` binary, or a build without gRPC), the remote commands are
   // listed for --help; the front binary never gets here with them (it hands them to distband-remote first).
   for (const RemoteCommandName& r : kRemoteCommands) {

@@ -213,6 +213,7 @@ int runCompute(const ComputeArgs& a, const CliContext& ctx) {
   const auto t_start = Clock::now();
   ComputeSetup setup;
   if (std::string e = checkComputeFlags(a, &setup); !e.empty()) return usage(ctx, e);
+  if (Status s = loadSeedPoints(&setup.spec, nullptr); !s.ok()) return usage(ctx, s.message());
   const FieldSpec& spec = setup.spec;
   // --threads bounds the whole command (mesh validation, seeds, VDB assembly), not only the engine's arena.
   std::optional<tbb::global_control> parallelism;

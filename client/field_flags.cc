@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "core/band/band_engine.h"
+#include "core/io/point_cloud.h"
 #include "core/seeds/mesh_seeds.h"
 #include "core/stencil.h"
 
@@ -82,11 +83,12 @@ CLI::Option* addOptional(CLI::App* cmd, const std::string& name, std::optional<T
 }
 
 std::string parseSeeds(const FieldFlags& f, FieldSpec* s) {
-  const int given = int(!f.mesh.empty()) + int(!f.points.empty()) + int(!f.volume.empty()) + int(!f.asset.empty());
+  const int given = int(!f.mesh.empty()) + int(!f.points.empty()) + int(!f.points_file.empty()) +
+                    int(!f.volume.empty()) + int(!f.asset.empty());
   if (given != 1)
-    return fmt::format("give exactly one seed source: --mesh FILE, --points \"x,y,z;...\"{} --volume FILE{}",
-                       f.assets == AssetSeeds::kYes ? "," : " or",
-                       f.assets == AssetSeeds::kYes ? " or --asset ID" : "");
+    return fmt::format(
+        "give exactly one seed source: --mesh FILE, --points \"x,y,z;...\", --points-file CLOUD{} --volume FILE{}",
+        f.assets == AssetSeeds::kYes ? "," : " or", f.assets == AssetSeeds::kYes ? " or --asset ID" : "");
   if (!f.mesh.empty()) {
     s->seeds = SeedKind::kMesh;
     s->source = f.mesh;
@@ -96,6 +98,13 @@ std::string parseSeeds(const FieldFlags& f, FieldSpec* s) {
   } else if (!f.points.empty()) {
     s->seeds = SeedKind::kPoints;
     if (std::string e = parsePointList(f.points, &s->points); !e.empty()) return e;
+  } else if (!f.points_file.empty()) {
+    s->seeds = SeedKind::kPoints;
+    PointFileFormat format;
+    if (!pointFileFormatFromPath(f.points_file, &format))
+      return fmt::format("--points-file {}: unknown point file format (expected .npy, .xyz, .txt or .ply)",
+                         f.points_file);
+    s->points_file = s->source = f.points_file;
   } else {
     // Upload names every asset by its kind (UploadReply.asset_id): the kind decides the grid and the sign.
     if (f.asset.rfind("mesh-", 0) == 0)
@@ -233,19 +242,23 @@ std::string parseField(const FieldFlags& f, FieldSpec* s) {
   return {};
 }
 
-}  // namespace
-
-void addFieldFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
+// Each flag is registered by one function, whichever command takes it, so its name, help and type cannot differ.
+void addSeedFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
   f->assets = assets;
   cmd->add_option("--mesh", f->mesh,
                   "Seed mesh (OBJ, OFF, PLY, STL): the distance to its triangles, signed per --sign");
   cmd->add_option("--points", f->points, "Seed points in world coordinates: \"x,y,z;x,y,z\" (unsigned distances)");
+  cmd->add_option("--points-file", f->points_file,
+                  "Seed points from a point cloud: .npy (N x 3 float32/float64), .xyz/.txt (x y z a line) or .ply "
+                  "(its vertices); the same field as the points given inline");
   cmd->add_option("--volume", f->volume,
                   "Seed or label volume: .npy (bool/uint8/16/32, shape (Z, Y, X)), NIfTI (.nii, .nii.gz) or NRRD "
                   "(.nrrd, .nhdr); nonzero = seed; its shape gives the grid's dims, its header the spacing and origin");
   if (assets == AssetSeeds::kYes)
     cmd->add_option("--asset", f->asset, "A mesh or volume the server holds (the id `distband upload` printed)");
-  cmd->add_option("--dims", f->dims, "Explicit grid dims X,Y,Z (a volume's: its shape, which --dims must equal)");
+}
+
+void addVoxelSizeFlag(CLI::App* cmd, FieldFlags* f) {
   addOptional(
       cmd, "--voxel-size", &f->voxel_size,
       fmt::format("Voxel size in world units (with --dims or a volume: default {:g}; around the seeds or --box: "
@@ -254,8 +267,33 @@ void addFieldFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
   cmd->add_option("--spacing", f->spacing,
                   "Voxel spacing X,Y,Z in world units with --dims or a volume (anisotropic voxels; default: the volume "
                   "file's header, else the voxel size); overrides the file's");
+}
+
+void addOriginFlag(CLI::App* cmd, FieldFlags* f) {
   cmd->add_option("--origin", f->origin,
                   "World position of voxel (0,0,0) with --dims or a volume: x,y,z (default 0,0,0)");
+}
+
+void addSignFlag(CLI::App* cmd, FieldFlags* f) { cmd->add_option("--sign", f->sign, signHelp()); }
+
+void addLimitFlag(CLI::App* cmd, FieldFlags* f) {
+  addOptional(cmd, "--limit", &f->limit,
+              "Distance limit in world units (default: none); voxels beyond it hold +limit (-limit inside)");
+}
+
+void addDeadlineFlag(CLI::App* cmd, FieldFlags* f) {
+  addOptional(cmd, "--deadline", &f->deadline,
+              "Give up this many seconds after the start (default: never): the complete segments are kept as on "
+              "Ctrl-C, exit 1");
+}
+
+}  // namespace
+
+void addFieldFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
+  addSeedFlags(cmd, f, assets);
+  cmd->add_option("--dims", f->dims, "Explicit grid dims X,Y,Z (a volume's: its shape, which --dims must equal)");
+  addVoxelSizeFlag(cmd, f);
+  addOriginFlag(cmd, f);
   addOptional(cmd, "--resolution", &f->resolution,
               "Voxels along the longest side of the padded box around the seeds or --box (the paper's N^3)");
   addOptional(cmd, "--padding", &f->padding,
@@ -269,10 +307,9 @@ void addFieldFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
                               algorithmName(FieldAlgorithm::kBand), algorithmName(FieldAlgorithm::kSeparable)));
   cmd->add_option("--stencil", f->stencil, stencilHelp());
   cmd->add_option("--mode", f->mode, modeHelp());
-  cmd->add_option("--sign", f->sign, signHelp());
+  addSignFlag(cmd, f);
   addOptional(cmd, "--segment", &f->segment, "Segment length in world units (default: one segment)");
-  addOptional(cmd, "--limit", &f->limit,
-              "Distance limit in world units (default: none); voxels beyond it hold +limit (-limit inside)");
+  addLimitFlag(cmd, f);
   addOptional(cmd, "--limit-voxels", &f->limit_voxels, "Distance limit in voxels of the grid (instead of --limit)");
   cmd->add_flag("--second-ring", f->second_ring,
                 "Meshes: also run the engine's second-ring correction (slower; query refuses it: the service's "
@@ -281,9 +318,40 @@ void addFieldFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
                 "Volumes: the multi-label EDT (each voxel of label L != 0 gets its distance to the nearest voxel of "
                 "another label; label 0 gets 0) instead of the distance to the nonzero voxels");
   cmd->add_flag("--black-border", f->black_border, "With --labels: the voxels just outside the grid are label 0");
-  addOptional(cmd, "--deadline", &f->deadline,
-              "Give up this many seconds after the start (default: never): the complete segments are kept as on "
-              "Ctrl-C, exit 1");
+  addDeadlineFlag(cmd, f);
+}
+
+void addPointQueryFlags(CLI::App* cmd, FieldFlags* f, AssetSeeds assets) {
+  addSeedFlags(cmd, f, assets);
+  addVoxelSizeFlag(cmd, f);
+  addOriginFlag(cmd, f);
+  addSignFlag(cmd, f);
+  addLimitFlag(cmd, f);
+  addDeadlineFlag(cmd, f);
+}
+
+std::string parsePointQueryFlags(const FieldFlags& flags, FieldSpec* spec) {
+  FieldSpec s;
+  if (std::string e = parseSeeds(flags, &s); !e.empty()) return e;
+  if (s.seeds == SeedKind::kVolume && !s.asset) {
+    if (std::string e = parseGrid(flags, &s); !e.empty()) return e;  // the lattice: --voxel-size, --origin
+  } else if (flags.voxel_size || !flags.origin.empty()) {
+    return "--voxel-size and --origin place a volume's voxels; the other seeds have no lattice";
+  }
+  if (std::string e = parseField(flags, &s); !e.empty()) return e;
+  *spec = std::move(s);
+  return {};
+}
+
+Status loadSeedPoints(FieldSpec* spec, const Interrupter* interrupter) {
+  if (spec->points_file.empty()) return Status::Ok();
+  std::vector<Vec3d> points;
+  if (Status s = loadPointCloud(spec->points_file, {}, interrupter, &points); !s.ok())
+    return s.withPrefix("--points-file");
+  if (points.empty())
+    return Status::InvalidArgument(fmt::format("--points-file {}: the cloud holds no point", spec->points_file));
+  spec->points = std::move(points);
+  return Status::Ok();
 }
 
 std::string parseFieldFlags(const FieldFlags& flags, FieldSpec* spec) {

@@ -1,7 +1,7 @@
 // Field flags: what `distband compute` and `distband query` compute — the seeds, the grid and the field — registered
 // once for both commands, so the two take the same names with the same meaning and the same defaults.
-//   seeds  --mesh FILE | --points "x,y,z;..." | --volume FILE.{npy,nii,nii.gz,nrrd,nhdr}
-//          | --asset ID (query only: an uploaded mesh/volume)
+//   seeds  --mesh FILE | --points "x,y,z;..." | --points-file CLOUD (.npy .xyz .txt .ply)
+//          | --volume FILE.{npy,nii,nii.gz,nrrd,nhdr} | --asset ID (query only: an uploaded mesh/volume)
 //   grid   --dims X,Y,Z [--voxel-size H | --spacing X,Y,Z] [--origin x,y,z]  an explicit lattice (a volume: its shape)
 //          | (--resolution N | --voxel-size H) [--padding P] [--box x0,y0,z0,x1,y1,z1]   around the seeds or the box
 //   field  [--algorithm A] [--stencil S] [--mode M] [--sign S] [--segment L] [--limit L | --limit-voxels V]
@@ -23,6 +23,10 @@
 //     asks for the multi-label EDT, --black-border (with --labels) makes the grid's outside label 0.
 //   * --second-ring applies to meshes; --deadline stops the command that many seconds after it started (the
 //     commands keep the complete segments, as on Ctrl-C, and exit 1).
+//   * `distband at` (distances at points: no grid) takes the flags that apply there, registered by the same functions
+//     (addPointQueryFlags): the seeds, a volume's lattice (--voxel-size, --origin), --sign, --limit and --deadline.
+//   * --points-file is read by the command once every flag is checked (loadSeedPoints; core/io/point_cloud.h), so a
+//     cloud gives exactly the field of the same points given inline.
 #pragma once
 
 #include <chrono>
@@ -49,7 +53,7 @@ enum class AssetSeeds { kNo, kYes };
 /// The field flags as given on the command line (unset: not given).
 struct FieldFlags {
   AssetSeeds assets = AssetSeeds::kNo;  ///< whether the command takes --asset (addFieldFlags sets it)
-  std::string mesh, points, volume, asset;
+  std::string mesh, points, points_file, volume, asset;
   std::optional<int> resolution, padding;
   std::optional<double> voxel_size;
   std::string dims, origin, box, spacing;
@@ -81,7 +85,8 @@ struct FieldSpec {
   SeedKind seeds = SeedKind::kPoints;
   std::string source;         ///< the --mesh or --volume file, or the --asset id; "" for --points
   bool asset = false;         ///< `source` is an uploaded asset's id
-  std::vector<Vec3d> points;  ///< --points
+  std::vector<Vec3d> points;  ///< --points, or --points-file's once loadSeedPoints() read it
+  std::string points_file;    ///< --points-file
   GridChoice grid;
   /// Seeds, mode, stencil, sign, limit, segments and second ring; the commands add closest features (--closest)
   /// and a point layout.
@@ -98,6 +103,14 @@ struct FieldSpec {
 
 /// Checks the field flags and fills `spec`; returns "" or a message naming the flag.
 std::string parseFieldFlags(const FieldFlags& flags, FieldSpec* spec);
+
+/// Registers the field flags a point query takes (`distband at`): the same options as addFieldFlags's.
+void addPointQueryFlags(CLI::App* command, FieldFlags* flags, AssetSeeds assets);
+/// Checks them and fills `spec` (its grid: a volume's lattice); returns "" or a message naming the flag.
+std::string parsePointQueryFlags(const FieldFlags& flags, FieldSpec* spec);
+
+/// Reads --points-file into spec->points (nothing to do for other seeds); errors name the file.
+Status loadSeedPoints(FieldSpec* spec, const Interrupter* interrupter);
 
 /// A volume's mask shape against --dims; returns "" or a message naming both.
 std::string checkMaskDims(const FieldSpec& spec, const Coord& mask_dims);

@@ -2,8 +2,8 @@
 // Two binaries are built from this file:
 //   * `distband`, the front binary: compute in-process, without the gRPC stack. Dynamic linking of gRPC, protobuf,
 //     abseil and OpenSSL (~50 libraries) cost every `distband compute` ~10 ms before main; so the service
-//     subcommands (query, upload, info, health) are run by handing the whole command line, unchanged, to
-//     `distband-remote` in the same directory (execv, as git runs its git-<command> helpers).
+//     subcommands (query, upload, info, health, and `at --server`) are run by handing the whole command line,
+//     unchanged, to `distband-remote` in the same directory (execv, as git runs its git-<command> helpers).
 //   * `distband-remote` (DISTBAND_FULL_CLI): every subcommand, the service's included.
 #include <malloc.h>
 #include <unistd.h>
@@ -31,9 +31,13 @@ int runRemoteHelper(char** argv) {
   return distband::kExitFailure;
 }
 
-bool isRemoteCommand(const char* arg) {
+/// The service's commands, and `at --server ...` (`at` runs in-process otherwise).
+bool isRemoteCommand(int argc, char** argv) {
   for (const distband::RemoteCommandName& r : distband::kRemoteCommands)
-    if (std::strcmp(arg, r.name) == 0) return true;
+    if (std::strcmp(argv[1], r.name) == 0) return true;
+  if (std::strcmp(argv[1], "at") != 0) return false;
+  for (int i = 2; i < argc; ++i)
+    if (std::strcmp(argv[i], "--server") == 0 || std::strncmp(argv[i], "--server=", 9) == 0) return true;
   return false;
 }
 #endif
@@ -42,7 +46,7 @@ bool isRemoteCommand(const char* arg) {
 
 int main(int argc, char** argv) {
 #if !defined(DISTBAND_FULL_CLI) && defined(DISTBAND_REMOTE_HELPER)
-  if (argc > 1 && isRemoteCommand(argv[1])) return runRemoteHelper(argv);
+  if (argc > 1 && isRemoteCommand(argc, argv)) return runRemoteHelper(argv);
 #endif
   // Grow malloc's heaps 64 MiB at a time and keep that much free at their tops: a command allocates and frees its
   // mesh, seeds and bricks in quick succession, and with glibc's default (grow and trim to the byte) each round

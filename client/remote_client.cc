@@ -1,6 +1,10 @@
 #include "client/remote_client.h"
 
 #include <algorithm>
+#include <atomic>
+#include <deque>
+#include <mutex>
+#include <thread>
 #include <cctype>
 #include <fstream>
 #include <iterator>
@@ -264,6 +268,107 @@ RemoteQueryResult RemoteClient::query(const v1::QueryRequest& request, const Rem
   else if (result.status.ok() && !result.have_summary)
     result.status = {grpc::StatusCode::INTERNAL, "the stream ended without a summary"};
   result.total_seconds = seconds();
+  return result;
+}
+
+RemotePointsResult RemoteClient::queryPoints(const v1::PointsHeader& header, const RemotePointsCallbacks& cb,
+                                             const RemoteQueryOptions& options) {
+  RemotePointsResult result;
+  const auto t0 = Clock::now();
+  grpc::ClientContext ctx;
+  authorize(&ctx);
+  if (options.deadline.count() > 0) ctx.set_deadline(std::chrono::system_clock::now() + options.deadline);
+  if (options.canceller) options.canceller->attach(&ctx);
+  auto stream = stub_->QueryPoints(&ctx);
+
+  // The writer: the header, then each chunk; the sizes sent let the reader check each result's point count.
+  std::mutex mu;
+  std::deque<uint64_t> sent_points;  // per chunk not yet answered
+  const size_t record = header.coordinates() == v1::VALUE_TYPE_FLOAT64 ? 24 : 12;
+  std::atomic<bool> stop_writing{false};
+  std::thread writer([&] {
+    v1::PointsRequest m;
+    *m.mutable_header() = header;
+    if (!stream->Write(m)) return;
+    for (;;) {
+      if (stop_writing.load()) return;
+      m.Clear();
+      std::string* xyz = m.mutable_chunk()->mutable_xyz();
+      if (!cb.next_chunk || !cb.next_chunk(xyz)) break;
+      {
+        std::lock_guard lock(mu);
+        sent_points.push_back(xyz->size() / record);
+      }
+      if (!stream->Write(m)) return;
+    }
+    stream->WritesDone();
+  });
+
+  std::string protocol_error;
+  bool go_on = true;
+  v1::PointsReply reply;
+  while (go_on && protocol_error.empty() && stream->Read(&reply)) {
+    switch (reply.kind_case()) {
+      case v1::PointsReply::kHeader:
+        if (result.have_header)
+          protocol_error = "a second header arrived";
+        else {
+          result.have_header = true;
+          result.header = reply.header();
+          if (cb.on_header) go_on = cb.on_header(result.header);
+        }
+        break;
+      case v1::PointsReply::kResults: {
+        const v1::PointsResults& r = reply.results();
+        uint64_t expected = 0;
+        {
+          std::lock_guard lock(mu);
+          if (!sent_points.empty()) {
+            expected = sent_points.front();
+            sent_points.pop_front();
+          }
+        }
+        if (!result.have_header)
+          protocol_error = "results arrived before the header";
+        else if (r.chunk() != result.chunks || r.first_point() != result.points || r.points() != expected)
+          protocol_error = fmt::format(
+              "results of chunk {} (first point {}, {} points) arrived where chunk {} "
+              "(first point {}, {} points) was due",
+              r.chunk(), r.first_point(), r.points(), result.chunks, result.points, expected);
+        else {
+          ++result.chunks;
+          result.points += r.points();
+          if (cb.on_results) go_on = cb.on_results(r);
+        }
+        break;
+      }
+      case v1::PointsReply::kSummary:
+        result.have_summary = true;
+        result.summary = reply.summary();
+        break;
+      case v1::PointsReply::KIND_NOT_SET:
+        protocol_error = "a reply with no content arrived";
+        break;
+    }
+  }
+  if (!go_on || !protocol_error.empty()) {
+    result.cancelled_by_client = go_on ? false : true;
+    stop_writing.store(true);
+    ctx.TryCancel();
+    while (stream->Read(&reply)) {
+    }
+  }
+  writer.join();
+  result.status = stream->Finish();
+  if (options.canceller) {
+    if (options.canceller->cancelled()) result.cancelled_by_client = true;
+    options.canceller->detach();
+  }
+  if (!protocol_error.empty())
+    result.status = {grpc::StatusCode::INTERNAL, "malformed server stream: " + protocol_error};
+  else if (result.status.ok() && !result.have_summary)
+    result.status = {grpc::StatusCode::INTERNAL, "the stream ended without a summary"};
+  result.total_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return result;
 }
 

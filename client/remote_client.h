@@ -88,6 +88,29 @@ struct RemoteQueryResult {
   std::chrono::steady_clock::time_point cancel_time{};  ///< when the client cancelled (if it did)
 };
 
+/// A QueryPoints stream (see the .proto): the client's side.
+struct RemotePointsCallbacks {
+  /// Fills the next chunk's packed xyz (the header's coordinates type); returns false when there are no more
+  /// points. Called on a writer thread of the call's own, one chunk at a time: the call is flow-controlled, so at most
+  /// a few chunks are in flight. A chunk left empty after returning true is sent as is (the server refuses it).
+  std::function<bool(std::string* xyz)> next_chunk;
+  /// The reply header; return false to cancel.
+  std::function<bool(const v1::PointsReplyHeader& header)> on_header;
+  /// One chunk's results, in the chunks' order; return false to cancel.
+  std::function<bool(const v1::PointsResults& results)> on_results;
+};
+
+struct RemotePointsResult {
+  grpc::Status status;
+  bool have_header = false;
+  v1::PointsReplyHeader header;
+  bool have_summary = false;
+  v1::PointsSummary summary;
+  uint64_t points = 0, chunks = 0;  ///< results received
+  double total_seconds = 0;
+  bool cancelled_by_client = false;
+};
+
 class RemoteClient {
  public:
   explicit RemoteClient(const std::string& target, RemoteClientOptions options = {});
@@ -105,6 +128,12 @@ class RemoteClient {
 
   RemoteQueryResult query(const v1::QueryRequest& request, const RemoteQueryCallbacks& callbacks,
                           const RemoteQueryOptions& options = {});
+
+  /// Sends `header`, then the chunks next_chunk() gives, and hands back the results as they arrive (the calling
+  /// thread reads). Checks the stream's order (one header, results chunk 0, 1, ... with the points sent, one
+  /// summary): INTERNAL otherwise. A false callback, the canceller or the deadline cancels the call.
+  RemotePointsResult queryPoints(const v1::PointsHeader& header, const RemotePointsCallbacks& callbacks,
+                                 const RemoteQueryOptions& options = {});
 
   grpc::Status info(v1::ServerInfo* info, std::chrono::milliseconds deadline = std::chrono::seconds(10));
   /// grpc.health.v1 Check. `service` "" asks about the whole server. *serving = status == SERVING.

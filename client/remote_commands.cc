@@ -145,7 +145,11 @@ std::string checkQueryFlags(const QueryArgs& a, QuerySetup* q) {
   if (std::string e = checkOutputFlags(a.outputs, spec.outputLimit(), &q->outputs); !e.empty()) return e;
   std::error_code ec;
   if (!spec.asset && !spec.source.empty() && !std::filesystem::is_regular_file(spec.source, ec))
-    return fmt::format("{} {}: no such file", spec.seeds == SeedKind::kMesh ? "--mesh" : "--volume", spec.source);
+    return fmt::format("{} {}: no such file",
+                       spec.seeds == SeedKind::kMesh     ? "--mesh"
+                       : spec.seeds == SeedKind::kVolume ? "--volume"
+                                                         : "--points-file",
+                       spec.source);
   if (!spec.asset && spec.seeds == SeedKind::kMesh && meshFormatFromPath(spec.source) == v1::MESH_FORMAT_UNSPECIFIED)
     return fmt::format("--mesh {}: unsupported mesh format (expected .obj, .off, .ply or .stl)", spec.source);
   if (!protoValue(a.encoding, &q->encoding))
@@ -420,6 +424,7 @@ int runQuery(const QueryArgs& a, const CliContext& ctx) {
   };
   QuerySetup q;
   if (std::string e = checkQueryFlags(a, &q); !e.empty()) return usage(e);
+  if (Status s = loadSeedPoints(&q.spec, nullptr); !s.ok()) return usage(s.message());
   const std::unique_ptr<RemoteClient> connection = connect(a.connection, "query", ctx);
   if (!connection) return kExitUsage;
   // Ctrl-C and --deadline trip the watch, which cancels the query on the server (its engine stops).
@@ -576,6 +581,155 @@ CliCommand registerHealth(CLI::App& app, const CliContext& ctx) {
 std::vector<CliCommand> registerRemoteCommands(CLI::App& app, const CliContext& context) {
   return {registerQuery(app, context), registerUpload(app, context), registerInfo(app, context),
           registerHealth(app, context)};
+}
+
+namespace {
+
+int runRemoteAt(const AtArgs& a, const ConnectionArgs& connection_args, const CliContext& ctx) {
+  const auto t_start = std::chrono::steady_clock::now();
+  auto usage = [&](const std::string& msg) {
+    ctx.err << "distband at: " << msg << "\n";
+    return kExitUsage;
+  };
+  AtSetup setup;
+  if (std::string e = checkAtFlags(a, true, &setup); !e.empty()) return usage(e);
+  FieldSpec& spec = setup.spec;
+  std::error_code ec;
+  if (!spec.asset && !spec.source.empty() && spec.seeds != SeedKind::kPoints &&
+      !std::filesystem::is_regular_file(spec.source, ec))
+    return usage(
+        fmt::format("{} {}: no such file", spec.seeds == SeedKind::kMesh ? "--mesh" : "--volume", spec.source));
+  if (Status s = loadSeedPoints(&spec, nullptr); !s.ok()) return usage(s.message());
+  const std::unique_ptr<RemoteClient> connection = connect(connection_args, "at", ctx);
+  if (!connection) return kExitUsage;
+  QueryCanceller canceller;
+  const auto deadline = spec.deadline(t_start);
+  InterruptWatch watch(ctx.interrupted, deadline, [&canceller] { canceller.cancel(); });
+
+  // The header: the seeds (meshes and volumes uploaded first, as query does), the sign and limit the flags gave
+  // (unset: the server's planner decides), the outputs, and the query points' type.
+  v1::QueryRequest uploaded;
+  grpc::Status status;
+  QuerySetup upload;  // uploadSeeds reads a volume file's header too; the point search takes its cubic lattice
+  upload.spec = spec;
+  if (std::string e = uploadSeeds(upload, *connection, ctx, &uploaded, &status); !e.empty()) return usage(e);
+  if (!status.ok()) {
+    ctx.err << "distband at: upload failed: " << describe(status) << "\n";
+    return exitCodeOf(status);
+  }
+  v1::PointsHeader header;
+  if (spec.seeds == SeedKind::kPoints) {
+    for (const Vec3d& p : spec.points) setVec(header.mutable_points()->add_points(), p);
+  } else {
+    header.set_asset_id(uploaded.asset_id());
+  }
+  if (spec.seeds == SeedKind::kVolume) {
+    if (spec.grid.lattice) setVec(header.mutable_volume_origin(), spec.grid.origin);
+    if (spec.grid.voxel_size > 0) header.set_volume_voxel_size(spec.grid.voxel_size);
+  }
+  const FieldRequest& f = spec.request;
+  v1::SignMode sign = v1::SIGN_MODE_UNSPECIFIED;
+  const std::string_view sign_name = f.inside_negative ? kMaskInsideSign
+                                     : f.mesh_sign     ? signMethodName(*f.mesh_sign)
+                                                       : std::string_view();
+  if (!sign_name.empty() && !protoValue(sign_name, &sign))
+    return usage("the protocol has no value for the --sign given (the service's enums and core's names disagree)");
+  header.set_sign(sign);
+  header.set_limit(std::isfinite(f.limit_world) ? f.limit_world : 0);
+  header.set_coordinates(setup.packing.doubles ? v1::VALUE_TYPE_FLOAT64 : v1::VALUE_TYPE_FLOAT32);
+  const PointOutputs wanted = pointOutputsOf(a.outputs);
+  header.set_closest_points(wanted.closest_points);
+  header.set_closest_feature(wanted.features);
+  header.set_gradient(wanted.gradients);
+
+  PointFileOutputs outputs;
+  if (Status s = outputs.open(a.outputs, setup.packing); !s.ok()) {
+    ctx.err << "distband at: " << s.message() << "\n";
+    return kExitFailure;
+  }
+  // The writer thread reads the query file a chunk at a time; a read error stops the stream (reported below).
+  std::string read_error;
+  std::vector<Vec3d> chunk;
+  RemotePointsCallbacks cb;
+  cb.next_chunk = [&](std::string* xyz) {
+    chunk.clear();
+    if (Status s = setup.points->next(size_t(a.chunk_points), &chunk); !s.ok()) {
+      read_error = s.message();
+      canceller.cancel();
+      return false;
+    }
+    if (chunk.empty()) return false;
+    PointResultBuffer::packValues(reinterpret_cast<const double*>(chunk.data()), 3 * chunk.size(), setup.packing, xyz);
+    return true;
+  };
+  std::string write_error;
+  cb.on_header = [&](const v1::PointsReplyHeader& h) {
+    ctx.out << fmt::format("distband at: server {} query {}; sign: {} ({}); limit {}\n", connection_args.server,
+                           h.query_id(), v1::SignMode_Name(h.sign()), h.sign_reason(),
+                           std::isfinite(h.limit()) ? fmt::format("{:g}", h.limit()) : std::string("none"));
+    ctx.out.flush();
+    return true;
+  };
+  cb.on_results = [&](const v1::PointsResults& r) {
+    if (Status s = outputs.append(r.points(), r.distance(), r.closest_points(), r.closest_feature(), r.gradient());
+        !s.ok()) {
+      write_error = s.message();
+      return false;
+    }
+    return true;
+  };
+  RemoteQueryOptions qo;
+  qo.canceller = &canceller;
+  if (deadline)
+    qo.deadline = std::max(std::chrono::milliseconds(1),
+                           std::chrono::ceil<std::chrono::milliseconds>(*deadline - std::chrono::steady_clock::now()));
+  const RemotePointsResult result = connection->queryPoints(header, cb, qo);
+  if (!read_error.empty()) {
+    outputs.abandon();
+    return usage(read_error);
+  }
+  if (!write_error.empty()) {
+    outputs.abandon();
+    ctx.err << "distband at: " << write_error << "\n";
+    return kExitFailure;
+  }
+  if (!result.status.ok()) {
+    outputs.abandon();
+    if (watch.deadlinePassed() || result.status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED) {
+      ctx.err << "distband at: the deadline (--deadline) passed; nothing written\n";
+      return kExitFailure;
+    }
+    if (canceller.cancelled()) {
+      ctx.err << "distband at: interrupted; nothing written\n";
+      return kExitInterrupted;
+    }
+    ctx.err << "distband at: " << describe(result.status) << "\n";
+    return result.status.error_code() == grpc::StatusCode::CANCELLED ? kExitFailure : exitCodeOf(result.status);
+  }
+  std::vector<std::string> lines;
+  if (Status s = outputs.finish(&lines); !s.ok()) {
+    ctx.err << "distband at: " << s.message() << "\n";
+    return kExitFailure;
+  }
+  for (const std::string& line : lines) ctx.out << line << "\n";
+  const v1::PointsSummary& sum = result.summary;
+  ctx.out << fmt::format(
+      "done: {} points in {} chunks, {:.3f} s ({:.3g} points/s); server: search {:.3f} s, compute {:.3f} s, "
+      "{} beyond the limit\n",
+      sum.points(), sum.chunks(), result.total_seconds,
+      result.total_seconds > 0 ? double(sum.points()) / result.total_seconds : 0.0, sum.search_seconds(),
+      sum.compute_seconds(), sum.beyond_limit());
+  return kExitOk;
+}
+
+}  // namespace
+
+AtRemote remoteAt() {
+  auto connection = std::make_shared<ConnectionArgs>();
+  AtRemote r;
+  r.add_flags = [connection](CLI::App* cmd) { addConnectionFlags(cmd, connection.get()); };
+  r.run = [connection](const AtArgs& a, const CliContext& ctx) { return runRemoteAt(a, *connection, ctx); };
+  return r;
 }
 
 }  // namespace distband

@@ -31,10 +31,14 @@
 
 #include <vector>
 
+#include "client/at_command.h"
 #include "client/command.h"
 
 namespace distband {
 
 std::vector<CliCommand> registerRemoteCommands(CLI::App& app, const CliContext& context);
+
+/// `distband at --server`: the connection flags, and the run that streams the query points to QueryPoints.
+AtRemote remoteAt();
 
 }  // namespace distband

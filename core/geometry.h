@@ -49,6 +49,8 @@ class TriangleDistance {
   }
 
   double dist2(const Vec3d& p) const { return offset(p).lengthSqr(); }
+  /// The (unnormalised) normal ab x ac.
+  Vec3d normal() const { return ab_.cross(ac_); }
   Vec3d closest(const Vec3d& p, TriangleFeature* feature = nullptr) const { return p - offset(p, feature); }
 
  private:

@@ -466,6 +466,7 @@ grpc::Status DistanceFieldService::GetInfo(grpc::ServerContext* context, const v
   r->set_memory_budget_bytes(budget_.capacity());
   r->set_memory_available_bytes(budget_.available());
   r->set_max_streams(uint32_t(options_.max_streams));
+  r->set_max_chunk_points(uint32_t(kMaxChunkPoints));
   r->set_idle_timeout_seconds(options_.idle_timeout_seconds);
   r->set_max_triangles(options_.max_triangles);
   r->set_max_vertices(options_.max_vertices);
@@ -649,6 +650,159 @@ Status DistanceFieldService::runQuery(grpc::ServerContext* context, ActiveCalls:
   if (!write(reply))
     return log(interrupter.interrupted() ? interrupter.status() : Status::Cancelled("the client went away"), stats);
   return log(Status::Ok(), stats);
+}
+
+grpc::Status DistanceFieldService::QueryPoints(grpc::ServerContext* context,
+                                               grpc::ServerReaderWriter<v1::PointsReply, v1::PointsRequest>* stream) {
+  const auto t0 = Clock::now();
+  const std::string id = fmt::format("p{}", next_query_.fetch_add(1));
+  const RequestId rid = takeRequestId(context);
+  std::unique_ptr<ActiveCalls::Call> call;
+  Status status = admitCall(context, "QueryPoints", &call);
+  if (status.ok()) {
+    status = runPoints(context, *call, stream, rid, id);
+  } else {
+    callLine("QueryPoints", rid, "query", id).text("peer", context->peer()).status(status).write();
+  }
+  metrics_.callEnded(Rpc::kQueryPoints, toGrpcCode(status.code()), since(t0));
+  return toGrpcStatus(status);
+}
+
+Status DistanceFieldService::runPoints(grpc::ServerContext* context, ActiveCalls::Call& call,
+                                       grpc::ServerReaderWriter<v1::PointsReply, v1::PointsRequest>* stream,
+                                       const RequestId& rid, const std::string& id) {
+  const auto t0 = Clock::now();
+  Interrupter& interrupter = call.interrupter();
+  std::string label = "-";
+  uint64_t points = 0, chunks = 0, beyond = 0;
+  auto log = [&](const Status& s) {
+    callLine("QueryPoints", rid, "query", id)
+        .text("peer", context->peer())
+        .text("seeds", label)
+        .number("points", points)
+        .number("chunks", chunks)
+        .seconds("time", since(t0))
+        .status(s)
+        .write();
+    return s;
+  };
+  auto gone = [&] {
+    if (interrupter.interrupted()) return interrupter.status();
+    if (context->IsCancelled()) return Status::Cancelled("the client cancelled the call");
+    return Status::Cancelled("the client went away");
+  };
+  v1::PointsRequest request;
+  auto read = [&] {
+    call.waitingForClient(true);
+    const bool ok = stream->Read(&request);
+    call.waitingForClient(false);
+    return ok;
+  };
+  auto write = [&](const v1::PointsReply& m) {
+    call.waitingForClient(true);
+    const bool ok = stream->Write(m);
+    call.waitingForClient(false);
+    return ok;
+  };
+
+  // The header, validated (an inline mesh parsed under admission) before any other work.
+  if (!read()) return log(gone());
+  if (request.kind_case() != v1::PointsRequest::kHeader)
+    return log(Status::InvalidArgument("header: the first message of a QueryPoints stream must be a header"));
+  if (pool_)
+    return log(Status::InvalidArgument(
+        "QueryPoints: this server is a coordinator, and point chunks do not fan out to replicas yet; send the "
+        "points to a replica"));
+  const v1::PointsHeader header = request.header();
+  std::shared_ptr<const Asset> inline_mesh;
+  if (Status s = checkInlineMesh(header, options_); !s.ok()) return log(s.withPrefix("header"));
+  if (header.seeds_case() == v1::PointsHeader::kMesh)
+    if (Status s = parseMeshAdmitted(context, call, header.mesh().data(), header.mesh().format(), "inline mesh",
+                                     "header.mesh", &inline_mesh, nullptr);
+        !s.ok())
+      return log(s);
+  ResolvedPoints p;
+  if (Status s = resolvePointsHeader(header, options_, cache_, std::move(inline_mesh), &p); !s.ok())
+    return log(s.code() == Status::Code::kInvalidArgument ? s.withPrefix("header") : s);
+  label = p.seeds_label;
+
+  // Admission: the search's peak bytes and one chunk's buffers (the points, the results, the packed reply).
+  const uint64_t chunk_bytes = uint64_t(kMaxChunkPoints) * (24 + 8 + 24 + 8 + 24) * 2;
+  const uint64_t peak = pointSearchBytes(p.plan, p.counts, PointSearch{}) + chunk_bytes + options_.stream_buffer_bytes;
+  MemoryBudget::Reservation memory;
+  ComputeSlot slot;
+  if (Status s = admitWork(context, call, peak, fmt::format("the point query on {}", p.seeds_label), &memory, &slot);
+      !s.ok())
+    return log(s);
+  const double queue_seconds = since(t0);
+  const auto t_search = Clock::now();
+  PointSeedSource source;
+  if (p.seed_kind == SeedKind::kMesh) {
+    source.mesh = p.asset->mesh.get();
+  } else if (p.seed_kind == SeedKind::kVolume) {
+    source.mask = p.asset->volume.seedMask();
+    source.lattice = p.lattice;
+  } else {
+    source.points = &p.points;
+  }
+  PointSearch search;
+  if (Status s = runCompute(context, call, [&] { return completePointSearch(p.plan, source, &interrupter, &search); });
+      !s.ok())
+    return log(s);
+  const double search_seconds = since(t_search);
+  {
+    v1::PointsReply reply;
+    fillPointsHeader(p, id, reply.mutable_header());
+    if (!write(reply)) return log(gone());
+  }
+
+  // The chunks, one at a time: read, decoded, computed, answered.
+  const v1::ValueType type = p.packing.doubles ? v1::VALUE_TYPE_FLOAT64 : v1::VALUE_TYPE_FLOAT32;
+  std::vector<Vec3d> at;
+  PointResultBuffer results;
+  double compute_seconds = 0;
+  v1::PointsReply reply;
+  while (read()) {
+    if (request.kind_case() != v1::PointsRequest::kChunk)
+      return log(Status::InvalidArgument(fmt::format("chunk {}: only the first message may be a header", chunks)));
+    if (Status s = decodePointsChunk(request.chunk(), type, chunks, points, &at); !s.ok()) return log(s);
+    results.resize(at.size(), p.outputs);
+    const auto t_chunk = Clock::now();
+    if (Status s = runCompute(context, call,
+                              [&] {
+                                return queryPoints(search, at.data(), at.size(), p.plan.queryOptions(&interrupter),
+                                                   results.results());
+                              });
+        !s.ok())
+      return log(s);
+    compute_seconds += since(t_chunk);
+    const double* d = results.results().distance;
+    for (size_t i = 0; i < at.size(); ++i) beyond += std::abs(d[i]) >= p.plan.limit_world;
+    v1::PointsResults* r = reply.mutable_results();
+    r->set_chunk(chunks);
+    r->set_first_point(points);
+    r->set_points(uint32_t(at.size()));
+    results.packDistance(p.packing, r->mutable_distance());
+    results.packClosestPoints(p.packing, r->mutable_closest_points());
+    results.packFeatures(p.packing, r->mutable_closest_feature());
+    results.packGradients(p.packing, r->mutable_gradient());
+    if (!write(reply)) return log(gone());
+    ++chunks;
+    points += at.size();
+  }
+  if (interrupter.interrupted() || context->IsCancelled()) return log(gone());
+  reply.Clear();
+  v1::PointsSummary* s = reply.mutable_summary();
+  s->set_points(points);
+  s->set_chunks(chunks);
+  s->set_beyond_limit(beyond);
+  s->set_search_cached(false);
+  s->set_search_seconds(search_seconds);
+  s->set_compute_seconds(compute_seconds);
+  s->set_queue_seconds(queue_seconds);
+  s->set_total_seconds(since(t0));
+  if (!write(reply)) return log(gone());
+  return log(Status::Ok());
 }
 
 }  // namespace distband

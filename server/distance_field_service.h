@@ -71,6 +71,13 @@ class DistanceFieldService final : public v1::DistanceField::Service {
                      grpc::ServerWriter<v1::QueryReply>* writer) override;
   grpc::Status GetInfo(grpc::ServerContext* context, const v1::GetInfoRequest* request,
                        v1::ServerInfo* reply) override;
+  /// Distances at points (see QueryPoints in the .proto): the header is validated before any work, the search is
+  /// built under admission (its bytes reserved, a compute slot held for the stream), then each chunk is read,
+  /// decoded (INVALID_ARGUMENT naming the chunk and the point), computed on a compute thread in the arena and
+  /// answered before the next is read: one chunk in memory, the client paused by flow control. A coordinator
+  /// refuses it (INVALID_ARGUMENT, as a tile sent to one: the chunks do not fan out to replicas yet).
+  grpc::Status QueryPoints(grpc::ServerContext* context,
+                           grpc::ServerReaderWriter<v1::PointsReply, v1::PointsRequest>* stream) override;
 
   /// With --peers: connects to the replicas (reads the --peer-* files); the service then coordinates (see
   /// server/tiled_query.h). Called once by the server before it serves.
@@ -126,6 +133,9 @@ class DistanceFieldService final : public v1::DistanceField::Service {
                   grpc::ServerWriter<v1::QueryReply>* writer, const RequestId& request_id, QueryRecord* record);
   /// An upload's reports to Metrics when its handler ends.
   void uploadEnded(Rpc rpc, const Status& status, const ActiveCalls::Call* call, uint64_t bytes, double seconds);
+  Status runPoints(grpc::ServerContext* context, ActiveCalls::Call& call,
+                   grpc::ServerReaderWriter<v1::PointsReply, v1::PointsRequest>* stream, const RequestId& rid,
+                   const std::string& id);
 
   const ServerOptions options_;
   const ServerHooks hooks_;

@@ -137,6 +137,7 @@ const char* rpcName(Rpc rpc) {
     case Rpc::kUploadVolume: return "UploadVolume";
     case Rpc::kQuery: return "Query";
     case Rpc::kGetInfo: return "GetInfo";
+    case Rpc::kQueryPoints: return "QueryPoints";
   }
   return "?";
 }

@@ -32,8 +32,8 @@
 namespace distband {
 
 /// The RPCs of distband.v1.DistanceField: the `rpc` label's values.
-enum class Rpc { kUploadMesh = 0, kUploadVolume, kQuery, kGetInfo };
-inline constexpr int kRpcCount = 4;
+enum class Rpc { kUploadMesh = 0, kUploadVolume, kQuery, kGetInfo, kQueryPoints };
+inline constexpr int kRpcCount = 5;
 const char* rpcName(Rpc rpc);
 
 /// Why an upload was refused: the `reason` label's values.

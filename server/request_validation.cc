@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <limits>
 
 #include <fmt/format.h>
 
@@ -20,10 +22,12 @@ Vec3d toVec(const v1::Vec3& v) { return {v.x(), v.y(), v.z()}; }
 constexpr int kMaxPoints = 1 << 20;
 constexpr double kMaxSegments = 100000;
 
-Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, AssetCache& cache,
-                    std::shared_ptr<const Asset> inline_mesh, ResolvedQuery* q) {
+/// The seeds of a QueryRequest or a PointsHeader (the same oneof): `Seeds` is ResolvedQuery or ResolvedPoints.
+template <typename Request, typename Seeds>
+Status resolveSeeds(const Request& r, const ServerOptions& options, AssetCache& cache,
+                    std::shared_ptr<const Asset> inline_mesh, Seeds* q) {
   switch (r.seeds_case()) {
-    case v1::QueryRequest::kAssetId: {
+    case Request::kAssetId: {
       if (r.asset_id().empty() || r.asset_id().size() > 128)
         return invalid(fmt::format("asset_id must be an id returned by an upload (got {} characters)",
                                    r.asset_id().size()));
@@ -38,14 +42,14 @@ Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, Ass
                        (q->asset->name.empty() ? "" : "(" + q->asset->name + ")");
       return Status::Ok();
     }
-    case v1::QueryRequest::kMesh: {
+    case Request::kMesh: {
       q->seed_kind = SeedKind::kMesh;
       q->seeds_label = fmt::format("inline-mesh({} bytes)", r.mesh().data().size());
       if (!inline_mesh) return Status::Internal("the inline mesh was not parsed before the query was resolved");
       q->asset = std::move(inline_mesh);
       return Status::Ok();
     }
-    case v1::QueryRequest::kPoints: {
+    case Request::kPoints: {
       const auto& pts = r.points().points();
       if (pts.empty()) return invalid("points.points must hold at least one point");
       if (pts.size() > kMaxPoints)
@@ -61,16 +65,61 @@ Status resolveSeeds(const v1::QueryRequest& r, const ServerOptions& options, Ass
       q->seeds_label = fmt::format("points({})", pts.size());
       return Status::Ok();
     }
-    case v1::QueryRequest::kVolume: {
+    case Request::kVolume: {
       q->seed_kind = SeedKind::kVolume;
       q->seeds_label = fmt::format("inline-volume({}x{}x{})", r.volume().dims().x(), r.volume().dims().y(),
                                    r.volume().dims().z());
       return parseVolumeAsset(r.volume().dims(), r.volume().element_type(), r.volume().mask(), "inline volume", "volume",
                               options.max_voxels_per_query, nullptr, &q->asset);
     }
-    case v1::QueryRequest::SEEDS_NOT_SET: break;
+    case Request::SEEDS_NOT_SET:
+      break;
   }
   return invalid("seeds: exactly one of asset_id, mesh, points, volume must be set");
+}
+
+// The request's sign for its seeds (UNSPECIFIED and AUTO leave it to the planner: meshes auto, points and volumes
+// unsigned); proto3 enums are open, so unknown numbers are refused rather than cast.
+Status readSign(v1::SignMode sign, SeedKind seeds, FieldRequest* fr) {
+  if (sign < v1::SIGN_MODE_UNSPECIFIED || sign > v1::SIGN_MODE_AUTO)
+    return invalid(fmt::format("sign must be a SignMode value 0..6 (got {})", int(sign)));
+  const bool default_sign = sign == v1::SIGN_MODE_UNSPECIFIED || sign == v1::SIGN_MODE_AUTO;
+  switch (seeds) {
+    case SeedKind::kPoints:
+      if (!default_sign && sign != v1::SIGN_MODE_UNSIGNED)
+        return invalid(
+            fmt::format("sign: point seeds only support SIGN_MODE_UNSIGNED (got {})", v1::SignMode_Name(sign)));
+      break;
+    case SeedKind::kVolume:
+      if (!default_sign && sign != v1::SIGN_MODE_UNSIGNED && sign != v1::SIGN_MODE_MASK_INSIDE)
+        return invalid(fmt::format("sign: volume seeds support SIGN_MODE_UNSIGNED or SIGN_MODE_MASK_INSIDE (got {})",
+                                   v1::SignMode_Name(sign)));
+      fr->inside_negative = sign == v1::SIGN_MODE_MASK_INSIDE;
+      break;
+    case SeedKind::kMesh:
+      switch (sign) {
+        case v1::SIGN_MODE_UNSIGNED:
+          fr->mesh_sign = SignMethod::kUnsigned;
+          break;
+        case v1::SIGN_MODE_PSEUDONORMAL:
+          fr->mesh_sign = SignMethod::kPseudonormal;
+          break;
+        case v1::SIGN_MODE_WINDING:
+          fr->mesh_sign = SignMethod::kWinding;
+          break;
+        case v1::SIGN_MODE_PARITY:
+          fr->mesh_sign = SignMethod::kParity;
+          break;
+        case v1::SIGN_MODE_MASK_INSIDE:
+          return invalid(
+              "sign: SIGN_MODE_MASK_INSIDE is for volume seeds; meshes take AUTO, UNSIGNED, PSEUDONORMAL, "
+              "WINDING or PARITY");
+        default:
+          break;
+      }
+      break;
+  }
+  return Status::Ok();
 }
 
 // A volume covers the whole grid, or a tile's window only (then its dims are the window's and the grid needs dims).
@@ -311,36 +360,7 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
     case v1::BRICK_ENCODING_FLOAT16: q.encoding = v1::BRICK_ENCODING_FLOAT16; break;
     default: return invalid(fmt::format("encoding must be a BrickEncoding value 0..2 (got {})", int(r.encoding())));
   }
-  const v1::SignMode sign = r.sign();
-  if (sign < v1::SIGN_MODE_UNSPECIFIED || sign > v1::SIGN_MODE_AUTO)
-    return invalid(fmt::format("sign must be a SignMode value 0..6 (got {})", int(sign)));
-  // UNSPECIFIED and AUTO leave the sign to the planner (meshes: auto; points and volumes: unsigned).
-  const bool default_sign = sign == v1::SIGN_MODE_UNSPECIFIED || sign == v1::SIGN_MODE_AUTO;
-  switch (q.seed_kind) {
-    case SeedKind::kPoints:
-      if (!default_sign && sign != v1::SIGN_MODE_UNSIGNED)
-        return invalid(fmt::format("sign: point seeds only support SIGN_MODE_UNSIGNED (got {})",
-                                   v1::SignMode_Name(sign)));
-      break;
-    case SeedKind::kVolume:
-      if (!default_sign && sign != v1::SIGN_MODE_UNSIGNED && sign != v1::SIGN_MODE_MASK_INSIDE)
-        return invalid(fmt::format("sign: volume seeds support SIGN_MODE_UNSIGNED or SIGN_MODE_MASK_INSIDE (got {})",
-                                   v1::SignMode_Name(sign)));
-      fr.inside_negative = sign == v1::SIGN_MODE_MASK_INSIDE;
-      break;
-    case SeedKind::kMesh:
-      switch (sign) {
-        case v1::SIGN_MODE_UNSIGNED: fr.mesh_sign = SignMethod::kUnsigned; break;
-        case v1::SIGN_MODE_PSEUDONORMAL: fr.mesh_sign = SignMethod::kPseudonormal; break;
-        case v1::SIGN_MODE_WINDING: fr.mesh_sign = SignMethod::kWinding; break;
-        case v1::SIGN_MODE_PARITY: fr.mesh_sign = SignMethod::kParity; break;
-        case v1::SIGN_MODE_MASK_INSIDE:
-          return invalid("sign: SIGN_MODE_MASK_INSIDE is for volume seeds; meshes take AUTO, UNSIGNED, PSEUDONORMAL, "
-                         "WINDING or PARITY");
-        default: break;
-      }
-      break;
-  }
+  if (Status s = readSign(r.sign(), q.seed_kind, &fr); !s.ok()) return s;
 
   if (!(r.segment_length() >= 0) || !std::isfinite(r.segment_length()))
     return invalid(fmt::format("segment_length must be finite and >= 0 (got {})", r.segment_length()));
@@ -411,8 +431,11 @@ Status resolveQuery(const v1::QueryRequest& r, const ServerOptions& options, Ass
   return Status::Ok();
 }
 
-Status checkInlineMesh(const v1::QueryRequest& r, const ServerOptions& options) {
-  if (r.seeds_case() != v1::QueryRequest::kMesh) return Status::Ok();
+namespace {
+
+template <typename Request>
+Status checkInlineMeshOf(const Request& r, const ServerOptions& options) {
+  if (r.seeds_case() != Request::kMesh) return Status::Ok();
   if (meshFormatExtension(r.mesh().format()).empty())
     return invalid(fmt::format("mesh.format must be one of MESH_FORMAT_OBJ, _OFF, _PLY, _STL (got {})",
                                int(r.mesh().format())));
@@ -420,6 +443,131 @@ Status checkInlineMesh(const v1::QueryRequest& r, const ServerOptions& options) 
   if (r.mesh().data().size() > options.max_upload_bytes)
     return Status::ResourceExhausted(fmt::format("mesh.data: {} bytes exceed the server's upload limit of {}",
                                                  r.mesh().data().size(), options.max_upload_bytes));
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status checkInlineMesh(const v1::QueryRequest& r, const ServerOptions& options) {
+  return checkInlineMeshOf(r, options);
+}
+Status checkInlineMesh(const v1::PointsHeader& h, const ServerOptions& options) {
+  return checkInlineMeshOf(h, options);
+}
+
+Status resolvePointsHeader(const v1::PointsHeader& h, const ServerOptions& options, AssetCache& cache,
+                           std::shared_ptr<const Asset> inline_mesh, ResolvedPoints* out) {
+  ResolvedPoints p;
+  if (Status s = resolveSeeds(h, options, cache, std::move(inline_mesh), &p); !s.ok()) return s;
+  p.cached = h.seeds_case() == v1::PointsHeader::kAssetId;
+  const bool volume = p.seed_kind == SeedKind::kVolume;
+  if (!volume && (h.has_volume_origin() || h.volume_voxel_size() != 0))
+    return invalid("volume_origin and volume_voxel_size place a volume's voxels; they apply to volume seeds only");
+  if (volume) {
+    if (h.has_volume_origin() && !finite(h.volume_origin()))
+      return invalid("volume_origin must have finite coordinates");
+    if (h.volume_voxel_size() != 0 && !(std::isfinite(h.volume_voxel_size()) && h.volume_voxel_size() > 0))
+      return invalid(fmt::format("volume_voxel_size must be finite and > 0 when set (got {})", h.volume_voxel_size()));
+    p.lattice = Grid(h.has_volume_origin() ? toVec(h.volume_origin()) : Vec3d{},
+                     h.volume_voxel_size() != 0 ? h.volume_voxel_size() : kDefaultVoxelSize, p.asset->volume.dims());
+  }
+  FieldRequest fr;
+  fr.seeds = p.seed_kind;
+  if (Status s = readSign(h.sign(), p.seed_kind, &fr); !s.ok()) return s;
+  if (std::isnan(h.limit()) || h.limit() < 0)
+    return invalid(fmt::format("limit must be > 0, +infinity, or 0 for no limit (got {})", h.limit()));
+  fr.limit_world = h.limit() == 0 ? std::numeric_limits<double>::infinity() : h.limit();
+  if (Status s = planPoints(fr, p.seed_kind == SeedKind::kMesh ? &p.asset->mesh_report : nullptr,
+                            volume ? &p.lattice : nullptr, &p.plan);
+      !s.ok())
+    return s;
+  switch (h.coordinates()) {
+    case v1::VALUE_TYPE_UNSPECIFIED:
+    case v1::VALUE_TYPE_FLOAT32:
+      p.packing.doubles = false;
+      break;
+    case v1::VALUE_TYPE_FLOAT64:
+      p.packing.doubles = true;
+      break;
+    default:
+      return invalid(fmt::format("coordinates must be a ValueType value 0..2 (got {})", int(h.coordinates())));
+  }
+  p.packing.wide_ids = volume;
+  p.outputs = {h.closest_points(), h.closest_feature(), h.gradient()};
+  switch (p.seed_kind) {
+    case SeedKind::kPoints:
+      p.counts.points = p.points.size();
+      break;
+    case SeedKind::kMesh:
+      p.counts.mesh_vertices = p.asset->mesh->vertices.size();
+      p.counts.mesh_triangles = p.asset->mesh->triangles.size();
+      break;
+    case SeedKind::kVolume: {
+      const VolumeFootprint& f = *p.asset->footprint;
+      const Coord d = p.asset->volume.dims();
+      const uint64_t faces = 2 * (uint64_t(d.x) * d.y + uint64_t(d.y) * d.z + uint64_t(d.x) * d.z);
+      p.counts.volume_boundary_voxels = f.boundary_voxels + std::min(f.seed_voxels, faces);
+      if (p.plan.inside_negative && f.seed_voxels == uint64_t(d.x) * d.y * d.z)
+        return invalid(
+            "sign: SIGN_MODE_MASK_INSIDE needs a zero voxel in the mask (every voxel is inside, so the "
+            "distance to the outside is undefined)");
+      break;
+    }
+  }
+  p.header = h;
+  *out = std::move(p);
+  return Status::Ok();
+}
+
+void fillPointsHeader(const ResolvedPoints& p, const std::string& query_id, v1::PointsReplyHeader* h) {
+  FieldPlan sign;  // signOf reads the seeds and the sign of a plan
+  sign.seeds = p.seed_kind;
+  sign.mesh_sign = p.plan.mesh_sign;
+  sign.inside_negative = p.plan.inside_negative;
+  sign.closest_features = p.outputs.features;
+  h->set_query_id(query_id);
+  h->set_sign(signOf(sign));
+  h->set_sign_reason(p.plan.sign_reason);
+  h->set_signed_(p.plan.signedField());
+  h->set_limit(p.plan.limit_world);
+  h->set_closest_feature(closestOf(sign));
+  h->set_values(p.packing.doubles ? v1::VALUE_TYPE_FLOAT64 : v1::VALUE_TYPE_FLOAT32);
+  h->set_max_chunk_points(uint32_t(kMaxChunkPoints));
+}
+
+Status decodePointsChunk(const v1::PointsChunk& chunk, v1::ValueType type, uint64_t chunk_index, uint64_t first_point,
+                         std::vector<Vec3d>* out) {
+  const bool doubles = type == v1::VALUE_TYPE_FLOAT64;
+  const size_t item = doubles ? 8 : 4, record = 3 * item;
+  const std::string& xyz = chunk.xyz();
+  if (xyz.size() % record != 0)
+    return invalid(fmt::format("chunk {}: xyz holds {} bytes, not a whole number of points of {} bytes (x, y, z in {})",
+                               chunk_index, xyz.size(), record, doubles ? "float64" : "float32"));
+  const size_t n = xyz.size() / record;
+  if (n == 0) return invalid(fmt::format("chunk {}: xyz holds no point", chunk_index));
+  if (n > kMaxChunkPoints)
+    return invalid(fmt::format("chunk {}: {} points, more than the {} a chunk may hold (max_chunk_points)", chunk_index,
+                               n, kMaxChunkPoints));
+  out->resize(n);
+  const char* p = xyz.data();
+  for (size_t i = 0; i < n; ++i, p += record) {
+    double v[3];
+    for (int k = 0; k < 3; ++k) {
+      if (doubles) {
+        std::memcpy(&v[k], p + 8 * k, 8);
+      } else {
+        float f;
+        std::memcpy(&f, p + 4 * k, 4);
+        v[k] = f;
+      }
+    }
+    if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2]))
+      return invalid(
+          fmt::format("chunk {}: point {} (point {} of the stream) has a coordinate that is not finite "
+                      "({}, {}, {})",
+                      chunk_index, i, first_point + i, v[0], v[1], v[2]));
+    (*out)[i] = {v[0], v[1], v[2]};
+  }
   return Status::Ok();
 }
 

@@ -21,6 +21,8 @@
 #include "core/grid.h"
 #include "core/mesh/mesh_grid.h"
 #include "core/field/tiling.h"
+#include "core/points/point_plan.h"
+#include "core/points/point_results.h"
 #include "distband/v1/distband.pb.h"
 #include "server/asset_cache.h"
 #include "server/server_options.h"
@@ -57,6 +59,36 @@ Status resolveQuery(const v1::QueryRequest& request, const ServerOptions& option
 
 /// The cheap checks of QueryRequest.mesh (format, size) before it is parsed; OK for requests without one.
 Status checkInlineMesh(const v1::QueryRequest& request, const ServerOptions& options);
+/// The same for PointsHeader.mesh.
+Status checkInlineMesh(const v1::PointsHeader& header, const ServerOptions& options);
+
+/// A QueryPoints stream's header, checked and resolved: the seeds, core's point plan (sign, limit), the outputs and how
+/// they are packed. Like resolveQuery it checks every rule before any work: kInvalidArgument naming the field,
+/// kNotFound for an unknown asset_id; cheap (the search is built later, under admission).
+struct ResolvedPoints {
+  SeedKind seed_kind = SeedKind::kPoints;
+  std::vector<Vec3d> points;           ///< kPoints, world coordinates
+  std::shared_ptr<const Asset> asset;  ///< kVolume / kMesh (cached or inline)
+  bool cached = false;                 ///< the asset is the cache's (asset_id): its search is kept with it
+  std::string seeds_label;             ///< for logs
+  Grid lattice;                        ///< volumes: where their voxels lie
+  PointPlan plan;
+  PointOutputs outputs;
+  PointPacking packing;
+  PointSeedCounts counts;   ///< what sizes the search (admission)
+  v1::PointsHeader header;  ///< as received (a coordinator forwards it)
+};
+Status resolvePointsHeader(const v1::PointsHeader& header, const ServerOptions& options, AssetCache& cache,
+                           std::shared_ptr<const Asset> inline_mesh, ResolvedPoints* out);
+
+/// The header message of a QueryPoints stream.
+void fillPointsHeader(const ResolvedPoints& points, const std::string& query_id, v1::PointsReplyHeader* header);
+
+/// Checks and decodes chunk number `chunk` (its points' coordinates of `type`): at least one and at most
+/// kMaxChunkPoints points, a whole number of them, every coordinate finite. kInvalidArgument naming the chunk and the
+/// point otherwise, e.g. "chunk 3: point 17 (point 196625 of the stream) has a coordinate that is not finite".
+Status decodePointsChunk(const v1::PointsChunk& chunk, v1::ValueType type, uint64_t chunk_index, uint64_t first_point,
+                         std::vector<Vec3d>* out);
 
 /// Output bricks the engine hands to a query's encoder at once (BandOptions::max_chunk_bricks).
 inline constexpr size_t kQueryChunkBricks = 1024;

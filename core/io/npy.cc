@@ -237,18 +237,28 @@ Status checkPayloadSize(std::string_view name, const NpyArray& a, uint64_t paylo
 
 }  // namespace
 
-Status parseNpy(std::string_view bytes, std::string_view name, NpyArray* out) {
+Status parseNpyHeader(std::string_view prefix, std::string_view name, NpyArray* header, size_t* data_offset,
+                      uint64_t* payload_bytes) {
   size_t start = 0, len = 0;
-  if (Status s = parsePreamble(bytes, name, &start, &len); !s.ok()) return s;
-  if (bytes.size() < start + len)
+  if (Status s = parsePreamble(prefix, name, &start, &len); !s.ok()) return s;
+  if (prefix.size() < start + len)
     return Status::InvalidArgument(fmt::format("{}: truncated .npy header ({} bytes declared, {} present)", name, len,
-                                               bytes.size() - start));
+                                               prefix.size() - start));
+  NpyArray a;
+  if (Status s = parseHeader(prefix.substr(start, len), name, &a, payload_bytes); !s.ok()) return s;
+  *data_offset = start + len;
+  *header = std::move(a);
+  return Status::Ok();
+}
+
+Status parseNpy(std::string_view bytes, std::string_view name, NpyArray* out) {
   NpyArray a;
   uint64_t payload = 0;
-  if (Status s = parseHeader(bytes.substr(start, len), name, &a, &payload); !s.ok()) return s;
-  const uint64_t have = bytes.size() - start - len;
+  size_t data_offset = 0;
+  if (Status s = parseNpyHeader(bytes, name, &a, &data_offset, &payload); !s.ok()) return s;
+  const uint64_t have = bytes.size() - data_offset;
   if (Status s = checkPayloadSize(name, a, payload, have); !s.ok()) return s;
-  const auto* p = reinterpret_cast<const uint8_t*>(bytes.data()) + start + len;
+  const auto* p = reinterpret_cast<const uint8_t*>(bytes.data()) + data_offset;
   a.data.assign(p, p + payload);
   *out = std::move(a);
   return Status::Ok();
@@ -393,6 +403,70 @@ Status writeNpyInt32(const std::string& path, const std::vector<int32_t>& values
 }
 Status writeNpyInt64(const std::string& path, const std::vector<int64_t>& values, const Coord& dims) {
   return writeNpyInts(path, "<i8", values, dims);
+}
+
+std::string NpyRowWriter::header() const {
+  const std::string shape =
+      columns_ > 0 ? fmt::format("({}, {})", rows_, columns_) : fmt::format("({},)", rows_);
+  std::string dict = fmt::format("{{'descr': '{}', 'fortran_order': False, 'shape': {}, }}", descr_, shape);
+  // A fixed 128-byte header (preamble, dict, spaces, newline), so the final count rewrites it in place.
+  constexpr size_t kHeaderBytes = 128, kPreamble = 10;
+  dict.append(kHeaderBytes - kPreamble - 1 - dict.size(), ' ');
+  dict.push_back('\n');
+  std::string out(kMagic, kMagicLen);
+  out.push_back('\x01');
+  out.push_back('\0');
+  out.push_back(char(dict.size() & 0xff));
+  out.push_back(char(dict.size() >> 8));
+  return out + dict;
+}
+
+Status NpyRowWriter::open(const std::string& path, std::string_view descr, int64_t columns) {
+  abandon();
+  path_ = path;
+  descr_ = std::string(descr);
+  columns_ = columns;
+  rows_ = 0;
+  if (descr_.size() > 8 || columns < 0) return Status::InvalidArgument(fmt::format("{}: bad dtype or columns", path));
+  if (Status s = openTempBeside(path, "wb", &tmp_, &file_); !s.ok()) return s;
+  const std::string h = header();
+  if (std::fwrite(h.data(), 1, h.size(), file_) != h.size()) {
+    abandon();
+    return Status::IoError(fmt::format("{}: write failed: {}", path, std::strerror(errno)));
+  }
+  return Status::Ok();
+}
+
+Status NpyRowWriter::append(const void* data, size_t bytes, int64_t rows) {
+  if (!file_) return Status::IoError(fmt::format("{}: not open", path_));
+  if (bytes > 0 && std::fwrite(data, 1, bytes, file_) != bytes) {
+    const Status s = Status::IoError(fmt::format("{}: write failed: {}", path_, std::strerror(errno)));
+    abandon();
+    return s;
+  }
+  rows_ += rows;
+  return Status::Ok();
+}
+
+Status NpyRowWriter::finish() {
+  if (!file_) return Status::IoError(fmt::format("{}: not open", path_));
+  const std::string h = header();
+  Status err;
+  if (std::fseek(file_, 0, SEEK_SET) != 0 || std::fwrite(h.data(), 1, h.size(), file_) != h.size())
+    err = Status::IoError(fmt::format("{}: write failed: {}", path_, std::strerror(errno)));
+  std::FILE* f = file_;
+  file_ = nullptr;
+  const Status s = commitTemp(f, tmp_, path_, err);
+  tmp_.clear();
+  return s;
+}
+
+void NpyRowWriter::abandon() {
+  if (!file_) return;
+  std::fclose(file_);
+  file_ = nullptr;
+  std::remove(tmp_.c_str());
+  tmp_.clear();
 }
 
 }  // namespace distband

@@ -18,6 +18,7 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -38,6 +39,12 @@ struct NpyArray {
 
 /// Parses a whole .npy image held in memory. `name` only labels error messages.
 Status parseNpy(std::string_view bytes, std::string_view name, NpyArray* out);
+
+/// The header of a .npy image whose first bytes `prefix` holds (at least the preamble and the header; the whole image
+/// will do): the array's dtype, order and shape (`header->data` stays empty), where its data starts and how many bytes
+/// the shape and dtype need. Same checks and codes as parseNpy, but the payload's size is the caller's to check.
+Status parseNpyHeader(std::string_view prefix, std::string_view name, NpyArray* header, size_t* data_offset,
+                      uint64_t* payload_bytes);
 
 /// Reads and parses a .npy file.
 Status readNpy(const std::string& path, NpyArray* out);
@@ -68,5 +75,32 @@ Status writeNpyVolume(const std::string& path, const LabelVolume& volume);
 /// Integer arrays of shape (Z, Y, X) (closest-feature ids), '<i4' or '<i8'; atomic like the others.
 Status writeNpyInt32(const std::string& path, const std::vector<int32_t>& values, const Coord& dims);
 Status writeNpyInt64(const std::string& path, const std::vector<int64_t>& values, const Coord& dims);
+
+/// A .npy array of rows — shape (rows,) or (rows, columns) — written block by block while the row count is not known
+/// yet (streamed outputs): the header is rewritten with the final count by finish(). Atomic like the writers above:
+/// the rows go to a temporary beside `path`, renamed over it by finish(); a writer destroyed unfinished (or
+/// abandon()ed) removes its temporary. Errors are kIoError naming the file.
+class NpyRowWriter {
+ public:
+  NpyRowWriter() = default;
+  ~NpyRowWriter() { abandon(); }
+  NpyRowWriter(const NpyRowWriter&) = delete;
+  NpyRowWriter& operator=(const NpyRowWriter&) = delete;
+
+  /// `columns` 0: a 1-D array. `descr`: e.g. "<f4", "<f8", "<i4", "<i8".
+  Status open(const std::string& path, std::string_view descr, int64_t columns);
+  /// Appends `rows` rows of `bytes` bytes in all.
+  Status append(const void* data, size_t bytes, int64_t rows);
+  Status finish();
+  void abandon();
+  int64_t rows() const { return rows_; }
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string header() const;
+  std::string path_, tmp_, descr_;
+  std::FILE* file_ = nullptr;
+  int64_t columns_ = 0, rows_ = 0;
+};
 
 }  // namespace distband

@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include "core/io/text_scan.h"
 #include "core/mesh/internal/mesh_reader_parts.h"
 
 namespace distband {
@@ -32,16 +33,7 @@ bool meshFormatFromPath(std::string_view path, MeshFormat* format) {
   return true;
 }
 
-std::string meshExcerpt(std::string_view text) {
-  std::string out;
-  for (size_t i = 0; i < text.size() && i < kMeshExcerptBytes; ++i) {
-    const unsigned char c = static_cast<unsigned char>(text[i]);
-    if (c >= 0x20 && c < 0x7f && c != '\\' && c != '\'' && c != '"') out += char(c);
-    else out += fmt::format("\\x{:02x}", c);
-  }
-  if (text.size() > kMeshExcerptBytes) out += "...";
-  return out;
-}
+std::string meshExcerpt(std::string_view text) { return textExcerpt(text, kMeshExcerptBytes); }
 
 uint64_t meshReadPeakBytes(uint64_t input_bytes) {
   // The densest inputs are text faces of long polygons (2 bytes per fan triangle) and short vertex lines (6 bytes per

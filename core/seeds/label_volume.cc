@@ -38,6 +38,13 @@ Status LabelVolume::make(const Coord& dims, VoxelType type, std::shared_ptr<cons
   return Status::Ok();
 }
 
+std::shared_ptr<const std::vector<uint8_t>> LabelVolume::seedMask() const {
+  if (type_ == VoxelType::kUint8) return bytes_;
+  auto mask = std::make_shared<std::vector<uint8_t>>(size_t(voxelCount()));
+  for (int64_t i = 0; i < voxelCount(); ++i) (*mask)[size_t(i)] = at(i) != 0;
+  return mask;
+}
+
 LabelVolume::LabelVolume(const Coord& dims, VoxelType type, std::shared_ptr<const std::vector<uint8_t>> bytes) {
   if (Status s = make(dims, type, std::move(bytes), this); !s.ok()) throw std::invalid_argument(s.message());
 }

@@ -57,6 +57,8 @@ class LabelVolume {
   const std::vector<uint8_t>& bytes() const { return *bytes_; }
   const std::shared_ptr<const std::vector<uint8_t>>& storage() const { return bytes_; }
   explicit operator bool() const { return bytes_ != nullptr; }
+  /// The seed mask (1 where the label is nonzero), x fastest: a uint8 volume's own bytes, shared; a wider one's copy.
+  std::shared_ptr<const std::vector<uint8_t>> seedMask() const;
 
   /// The label of voxel `i` (linear, x fastest).
   uint32_t at(int64_t i) const {

@@ -81,10 +81,10 @@ TEST(FieldFlagsTest, ComputeAndQueryTakeTheSameFieldFlags) {
   const std::vector<std::string> field = fieldFlagNames(AssetSeeds::kNo);
   EXPECT_EQ(
       std::set<std::string>(field.begin(), field.end()),
-      (std::set<std::string>{
-          "--mesh",    "--points",       "--volume",      "--dims",     "--voxel-size", "--origin", "--resolution",
-          "--padding", "--box",          "--algorithm",   "--stencil",  "--mode",       "--sign",   "--segment",
-          "--limit",   "--limit-voxels", "--second-ring", "--deadline", "--spacing",    "--labels", "--black-border"}));
+      (std::set<std::string>{"--mesh", "--points", "--points-file", "--volume", "--dims", "--voxel-size", "--origin",
+                             "--resolution", "--padding", "--box", "--algorithm", "--stencil", "--mode", "--sign",
+                             "--segment", "--limit", "--limit-voxels", "--second-ring", "--deadline", "--spacing",
+                             "--labels", "--black-border"}));
   for (const std::string& name : field) {
     ASSERT_TRUE(compute.count(name)) << name;
     ASSERT_TRUE(query.count(name)) << name;
@@ -99,6 +99,13 @@ TEST(FieldFlagsTest, ComputeAndQueryTakeTheSameFieldFlags) {
   for (const auto& [name, text] : info)
     if (name != "--help") query_own.insert(name);
   EXPECT_EQ(onlyIn(query, compute), query_own);
+  // `at` takes the field flags that apply to points, registered by the same functions: the same names and text.
+  const std::map<std::string, OptionText> at = optionsOf(*app.get_subcommand("at"));
+  for (const char* name : {"--mesh", "--points", "--points-file", "--volume", "--asset", "--voxel-size", "--origin",
+                           "--sign", "--limit", "--deadline"}) {
+    ASSERT_TRUE(at.count(name)) << name;
+    EXPECT_EQ(at.at(name), query.at(name)) << name;
+  }
 }
 
 TEST(FieldFlagsTest, BothHelpsListTheSameFieldFlags) {

@@ -504,5 +504,62 @@ class AuthenticatedServerTest(unittest.TestCase):
         self.assertEqual(e.exception.code, "UNAVAILABLE")
 
 
+class DistanceAtTest(unittest.TestCase):
+    """distance_at() through QueryPoints, against exact distances computed here (seed points: numpy brute force)."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.server = ServerProcess()
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.server.stop()
+
+    def test_seed_points_exact_in_order_over_several_chunks(self):
+        rng = np.random.default_rng(4)
+        seeds = rng.uniform(-1, 1, (7, 3))
+        at = rng.uniform(-2, 2, (5000, 3))
+        d = distband_client.distance_at(self.server.target, at, points=seeds, chunk_points=777)
+        exact = np.sqrt(((at[:, None, :] - seeds[None, :, :]) ** 2).sum(-1))
+        self.assertEqual(d.dtype, np.float64)
+        np.testing.assert_allclose(d, exact.min(1), rtol=0, atol=1e-12)
+        r = distband_client.distance_at(self.server.target, at.astype(np.float32), points=seeds, ids=True,
+                                        closest_points=True, gradient=True, limit=1.0)
+        self.assertEqual(r["distance"].dtype, np.float32)
+        near = exact.min(1) <= 1.0
+        np.testing.assert_array_equal(r["ids"][near], exact.argmin(1)[near])
+        np.testing.assert_array_equal(r["ids"][~near], -1)
+        np.testing.assert_array_equal(r["distance"][~near], np.float32(1.0))
+        np.testing.assert_allclose(r["closest_points"][near], seeds[r["ids"][near]], atol=1e-6)
+        np.testing.assert_allclose(np.linalg.norm(r["gradient"][near], axis=1), 1, atol=1e-5)
+
+    def test_mesh_equals_the_cli_in_process(self):
+        rng = np.random.default_rng(9)
+        with open(BUNNY) as f:
+            v = np.array([line.split()[1:4] for line in f if line.startswith("v ")], dtype=np.float64)
+        at = rng.uniform(v.min(0), v.max(0), (2000, 3)).astype(np.float32)
+        r = distband_client.distance_at(self.server.target, at, mesh=BUNNY, ids=True)
+        with tempfile.TemporaryDirectory() as d:
+            np.save(os.path.join(d, "q.npy"), at)
+            subprocess.run([CLI, "at", "--mesh", BUNNY, "--at", os.path.join(d, "q.npy"), "--out",
+                            os.path.join(d, "d.npy"), "--closest", os.path.join(d, "i.npy")], check=True,
+                           capture_output=True)
+            np.testing.assert_array_equal(r["distance"], np.load(os.path.join(d, "d.npy")))
+            np.testing.assert_array_equal(r["ids"], np.load(os.path.join(d, "i.npy")))
+        self.assertTrue((r["distance"] < 0).any() and (r["distance"] > 0).any())
+
+    def test_bad_arguments_and_server_refusals(self):
+        with self.assertRaises(ValueError):
+            distband_client.distance_at(self.server.target, [[0, 0, float("nan")]], points=[(0, 0, 0)])
+        with self.assertRaises(ValueError):
+            distband_client.distance_at(self.server.target, np.zeros((3, 2)), points=[(0, 0, 0)])
+        with self.assertRaises(ValueError):
+            distband_client.distance_at(self.server.target, np.zeros((3, 3)))
+        with self.assertRaises(DistbandError) as e:
+            distband_client.distance_at(self.server.target, np.zeros((3, 3)), points=[(0, 0, 0)], sign="winding")
+        self.assertEqual(e.exception.code, "INVALID_ARGUMENT")
+        self.assertIn("sign", e.exception.details)
+
+
 if __name__ == "__main__":
     unittest.main(verbosity=2)

@@ -1,4 +1,5 @@
-// Internals of core/mesh/mesh_reader: the raw mesh each format reader fills, and the text scanning they share.
+// Internals of core/mesh/mesh_reader: the raw mesh each format reader fills (their text scanning is
+// core/io/text_scan.h's).
 // Not part of the public API (only mesh_reader*.cc and tests include it).
 #pragma once
 
@@ -11,6 +12,7 @@
 #include <vector>
 
 #include "core/interrupter.h"
+#include "core/io/text_scan.h"
 #include "core/mesh/mesh_reader.h"
 #include "core/status.h"
 #include "core/types.h"
@@ -33,54 +35,7 @@ Status readStl(std::string_view bytes, const MeshReadLimits& limits, const Inter
 /// Polled every this many lines or records.
 inline constexpr uint64_t kPollEvery = 1 << 16;
 
-inline bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
-
-/// Splits off the next whitespace-separated token of `*rest` ("" when none is left).
-inline std::string_view nextToken(std::string_view* rest) {
-  size_t b = 0;
-  while (b < rest->size() && (isSpace((*rest)[b]) || (*rest)[b] == '\n')) ++b;
-  size_t e = b;
-  while (e < rest->size() && !isSpace((*rest)[e]) && (*rest)[e] != '\n') ++e;
-  const std::string_view token = rest->substr(b, e - b);
-  rest->remove_prefix(e);
-  return token;
-}
-
-/// A whole token as a finite double (locale-independent; a leading '+' is accepted; inf, nan and values beyond the
-/// double range are refused).
-inline bool parseDouble(std::string_view t, double* out) {
-  if (!t.empty() && t.front() == '+') t.remove_prefix(1);
-  const auto [p, ec] = std::from_chars(t.data(), t.data() + t.size(), *out);
-  return ec == std::errc() && p == t.data() + t.size() && !t.empty() && std::isfinite(*out);
-}
-
-/// A whole token as a signed 64-bit integer.
-inline bool parseInt(std::string_view t, int64_t* out) {
-  if (!t.empty() && t.front() == '+') t.remove_prefix(1);
-  const auto [p, ec] = std::from_chars(t.data(), t.data() + t.size(), *out);
-  return ec == std::errc() && p == t.data() + t.size() && !t.empty();
-}
-
-/// Lines of a text file, with their 1-based numbers; '\r' before '\n' is dropped.
-class LineReader {
- public:
-  explicit LineReader(std::string_view text) : rest_(text) {}
-  bool next(std::string_view* line) {
-    if (rest_.empty()) return false;
-    const size_t eol = rest_.find('\n');
-    *line = rest_.substr(0, eol);
-    rest_.remove_prefix(eol == std::string_view::npos ? rest_.size() : eol + 1);
-    if (!line->empty() && line->back() == '\r') line->remove_suffix(1);
-    ++number_;
-    return true;
-  }
-  uint64_t number() const { return number_; }
-  size_t remaining() const { return rest_.size(); }
-
- private:
-  std::string_view rest_;
-  uint64_t number_ = 0;
-};
+// Text scanning: core/io/text_scan.h.
 
 /// Adds the fan of polygon `corners` (k >= 3) to `out`, dropping triangles that repeat a corner.
 /// kResourceExhausted when the triangles would exceed `max_triangles`.
