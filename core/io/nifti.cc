@@ -47,6 +47,31 @@ struct Header {
   bool big_endian = false;
 };
 
+// Both versions name their fields alike (NIfTI-2 widens them): one byte swap and one copy serve both. vox_offset is
+// copied by the caller, which checks NIfTI-1's float offset.
+template <class NiftiHeader>
+void copyCommonFields(NiftiHeader& n, bool swap, int version, Header* h) {
+  if (swap) {
+    swapInPlace(n.dim, 8);
+    swapInPlace(&n.datatype), swapInPlace(&n.bitpix);
+    swapInPlace(n.pixdim, 8);
+    swapInPlace(&n.vox_offset), swapInPlace(&n.scl_slope), swapInPlace(&n.scl_inter);
+    swapInPlace(&n.qform_code), swapInPlace(&n.sform_code);
+    swapInPlace(&n.quatern_b), swapInPlace(&n.quatern_c), swapInPlace(&n.quatern_d);
+    swapInPlace(&n.qoffset_x), swapInPlace(&n.qoffset_y), swapInPlace(&n.qoffset_z);
+    swapInPlace(n.srow_x, 4), swapInPlace(n.srow_y, 4), swapInPlace(n.srow_z, 4);
+  }
+  h->version = version;
+  for (int i = 0; i < 8; ++i) h->dim[i] = n.dim[i], h->pixdim[i] = n.pixdim[i];
+  h->datatype = n.datatype;
+  h->bitpix = n.bitpix;
+  h->scl_slope = n.scl_slope, h->scl_inter = n.scl_inter;
+  h->qform_code = n.qform_code, h->sform_code = n.sform_code;
+  h->quatern[0] = n.quatern_b, h->quatern[1] = n.quatern_c, h->quatern[2] = n.quatern_d;
+  h->qoffset[0] = n.qoffset_x, h->qoffset[1] = n.qoffset_y, h->qoffset[2] = n.qoffset_z;
+  for (int c = 0; c < 4; ++c) h->srow[0][c] = n.srow_x[c], h->srow[1][c] = n.srow_y[c], h->srow[2][c] = n.srow_z[c];
+}
+
 Status readHeader(std::string_view b, std::string_view name, Header* h) {
   if (b.size() < 4) return Status::InvalidArgument(fmt::format("{}: too short for a NIfTI header", name));
   int32_t size;
@@ -67,29 +92,11 @@ Status readHeader(std::string_view b, std::string_view name, Header* h) {
     if (std::memcmp(n.magic, "n+1\0", 4) != 0)
       return Status::InvalidArgument(fmt::format(
           "{}: NIfTI-1 magic is not \"n+1\" (a .hdr/.img pair is not read: give the single-file .nii)", name));
-    if (swap) {
-      swapInPlace(n.dim, 8);
-      swapInPlace(&n.datatype), swapInPlace(&n.bitpix);
-      swapInPlace(n.pixdim, 8);
-      swapInPlace(&n.vox_offset), swapInPlace(&n.scl_slope), swapInPlace(&n.scl_inter);
-      swapInPlace(&n.qform_code), swapInPlace(&n.sform_code);
-      swapInPlace(&n.quatern_b), swapInPlace(&n.quatern_c), swapInPlace(&n.quatern_d);
-      swapInPlace(&n.qoffset_x), swapInPlace(&n.qoffset_y), swapInPlace(&n.qoffset_z);
-      swapInPlace(n.srow_x, 4), swapInPlace(n.srow_y, 4), swapInPlace(n.srow_z, 4);
-    }
-    h->version = 1;
-    for (int i = 0; i < 8; ++i) h->dim[i] = n.dim[i], h->pixdim[i] = n.pixdim[i];
-    h->datatype = n.datatype;
-    h->bitpix = n.bitpix;
+    copyCommonFields(n, swap, 1, h);
     if (!(std::isfinite(n.vox_offset) && n.vox_offset >= 0 && n.vox_offset <= 1e15 &&
           n.vox_offset == std::floor(n.vox_offset)))
       return Status::InvalidArgument(fmt::format("{}: vox_offset {} is not a byte offset", name, n.vox_offset));
     h->vox_offset = int64_t(n.vox_offset);
-    h->scl_slope = n.scl_slope, h->scl_inter = n.scl_inter;
-    h->qform_code = n.qform_code, h->sform_code = n.sform_code;
-    h->quatern[0] = n.quatern_b, h->quatern[1] = n.quatern_c, h->quatern[2] = n.quatern_d;
-    h->qoffset[0] = n.qoffset_x, h->qoffset[1] = n.qoffset_y, h->qoffset[2] = n.qoffset_z;
-    for (int c = 0; c < 4; ++c) h->srow[0][c] = n.srow_x[c], h->srow[1][c] = n.srow_y[c], h->srow[2][c] = n.srow_z[c];
     return Status::Ok();
   }
   if (b.size() < sizeof(nifti_2_header))
@@ -99,26 +106,8 @@ Status readHeader(std::string_view b, std::string_view name, Header* h) {
   if (std::memcmp(n.magic, "n+2\0\r\n\032\n", 8) != 0)
     return Status::InvalidArgument(fmt::format(
         "{}: NIfTI-2 magic is not \"n+2\" (a .hdr/.img pair is not read: give the single-file .nii)", name));
-  if (swap) {
-    swapInPlace(n.dim, 8);
-    swapInPlace(&n.datatype), swapInPlace(&n.bitpix);
-    swapInPlace(n.pixdim, 8);
-    swapInPlace(&n.vox_offset), swapInPlace(&n.scl_slope), swapInPlace(&n.scl_inter);
-    swapInPlace(&n.qform_code), swapInPlace(&n.sform_code);
-    swapInPlace(&n.quatern_b), swapInPlace(&n.quatern_c), swapInPlace(&n.quatern_d);
-    swapInPlace(&n.qoffset_x), swapInPlace(&n.qoffset_y), swapInPlace(&n.qoffset_z);
-    swapInPlace(n.srow_x, 4), swapInPlace(n.srow_y, 4), swapInPlace(n.srow_z, 4);
-  }
-  h->version = 2;
-  for (int i = 0; i < 8; ++i) h->dim[i] = n.dim[i], h->pixdim[i] = n.pixdim[i];
-  h->datatype = n.datatype;
-  h->bitpix = n.bitpix;
+  copyCommonFields(n, swap, 2, h);
   h->vox_offset = n.vox_offset;
-  h->scl_slope = n.scl_slope, h->scl_inter = n.scl_inter;
-  h->qform_code = n.qform_code, h->sform_code = n.sform_code;
-  h->quatern[0] = n.quatern_b, h->quatern[1] = n.quatern_c, h->quatern[2] = n.quatern_d;
-  h->qoffset[0] = n.qoffset_x, h->qoffset[1] = n.qoffset_y, h->qoffset[2] = n.qoffset_z;
-  for (int c = 0; c < 4; ++c) h->srow[0][c] = n.srow_x[c], h->srow[1][c] = n.srow_y[c], h->srow[2][c] = n.srow_z[c];
   return Status::Ok();
 }
 
