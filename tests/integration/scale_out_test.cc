@@ -490,8 +490,9 @@ TEST(ScaleOutTest, ATileThatCannotBeComputedAnywhereEndsInUnavailable) {
 }
 
 TEST(ScaleOutTest, CancelAtTheCoordinatorStopsEveryTileWithin100ms) {
-  Cluster cluster(64 * 64 * 64);
-  // Unlimited point seeds on a large grid: every tile computes for a while.
+  // Unlimited point seeds on a large grid in tiles of 160^3 (8 tiles, 4 M voxels each): every tile computes for a
+  // while (hundreds of milliseconds on one thread), so the cancel finds tiles running on every replica.
+  Cluster cluster(160 * 160 * 160);
   const v1::QueryRequest request = pointsRequest(randomPoints(30, 160.0, 5), {320, 320, 320}, 0.5, 0, 0);
   QueryCanceller canceller;
   RemoteQueryOptions options;
@@ -505,7 +506,7 @@ TEST(ScaleOutTest, CancelAtTheCoordinatorStopsEveryTileWithin100ms) {
       if (busy == 3) break;
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
     canceller.cancel();
   });
   RemoteQueryCallbacks cb;
