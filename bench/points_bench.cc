@@ -199,7 +199,7 @@ void runPeer(const TriangleMesh& mesh, const std::vector<Vec3d>& at, const Optio
     std::fprintf(stderr, "open3d peer unavailable (exit %d): %s\n", rc, out.c_str());
     return;
   }
-  auto number = [&](const char* key) {
+  auto number = [&out = out](const char* key) {  // clang 14 cannot capture a structured binding implicitly
     const size_t i = out.find(fmt::format("\"{}\": ", key));
     return i == std::string::npos ? NAN : std::atof(out.c_str() + i + std::strlen(key) + 4);
   };
