@@ -63,10 +63,12 @@ class Source {
   }
   Status fill(size_t want) {
     if (!file_ || view_.size() >= want || offset_ + view_.size() >= size_) return Status::Ok();
+    // The unread rest moves to the front; its place is taken before a resize can move the buffer under it.
     const size_t keep = view_.size();
+    const size_t at = keep ? size_t(view_.data() - buffer_.data()) : 0;
     const size_t capacity = std::max(block_, want);
     if (buffer_.size() < capacity) buffer_.resize(capacity);
-    std::memmove(buffer_.data(), view_.data(), keep);
+    if (keep) std::memmove(buffer_.data(), buffer_.data() + at, keep);
     const size_t ask = size_t(std::min<uint64_t>(capacity - keep, size_ - offset_ - keep));
     const size_t got = std::fread(buffer_.data() + keep, 1, ask, file_.get());
     if (got != ask) return Status::IoError(fmt::format("{}: read failed at byte {}", path_, offset_ + keep + got));
