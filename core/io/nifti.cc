@@ -279,7 +279,7 @@ Status writeNiftiField(const std::string& path, const std::vector<float>& values
   std::memcpy(h.magic, "n+1\0", 4);
   std::string raw(352 + values.size() * sizeof(float), '\0');
   std::memcpy(raw.data(), &h, sizeof h);  // then 4 bytes of zeros: no extension
-  std::memcpy(raw.data() + 352, values.data(), values.size() * sizeof(float));
+  if (!values.empty()) std::memcpy(raw.data() + 352, values.data(), values.size() * sizeof(float));
   std::string gz;
   if (Status s = gzipCompress(raw, &gz); !s.ok()) return s;
   std::string tmp;

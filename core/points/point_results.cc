@@ -23,7 +23,7 @@ PointResults PointResultBuffer::results() {
 void PointResultBuffer::packValues(const double* values, size_t n, const PointPacking& p, std::string* out) {
   out->resize(n * (p.doubles ? 8 : 4));
   if (p.doubles) {
-    std::memcpy(out->data(), values, n * 8);
+    if (n) std::memcpy(out->data(), values, n * 8);  // an empty output's data() may be null
     return;
   }
   char* dst = out->data();
@@ -46,7 +46,7 @@ void PointResultBuffer::packFeatures(const PointPacking& p, std::string* out) co
   const size_t n = feature_.size();
   out->resize(n * (p.wide_ids ? 8 : 4));
   if (p.wide_ids) {
-    std::memcpy(out->data(), feature_.data(), n * 8);
+    if (n) std::memcpy(out->data(), feature_.data(), n * 8);
     return;
   }
   char* dst = out->data();
