@@ -6,13 +6,13 @@
 #include <mutex>
 #include <thread>
 #include <cctype>
-#include <fstream>
 #include <iterator>
-#include <sstream>
 
 #include <fmt/format.h>
 #include <grpcpp/grpcpp.h>
 
+#include "core/io/input_file.h"
+#include "core/mesh/triangle_mesh.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "proto/brick_codec.h"
 
@@ -127,13 +127,11 @@ grpc::Status RemoteClient::uploadMeshFile(const std::string& path, v1::UploadRep
   if (format == v1::MESH_FORMAT_UNSPECIFIED)
     return {grpc::StatusCode::INVALID_ARGUMENT,
             fmt::format("{}: unsupported mesh format (expected .obj, .off, .ply or .stl)", path)};
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return {grpc::StatusCode::INVALID_ARGUMENT, fmt::format("{}: cannot open the file", path)};
-  std::ostringstream buf;
-  buf << in.rdbuf();
-  if (in.bad()) return {grpc::StatusCode::INVALID_ARGUMENT, fmt::format("{}: cannot read the file", path)};
+  std::string bytes;
+  if (Status s = readWholeFile(path, kMaxMeshFileBytes, "a mesh", &bytes); !s.ok())
+    return {grpc::StatusCode::INVALID_ARGUMENT, s.message()};
   const size_t slash = path.find_last_of('/');
-  return uploadMesh(buf.str(), format, slash == std::string::npos ? path : path.substr(slash + 1), reply);
+  return uploadMesh(bytes, format, slash == std::string::npos ? path : path.substr(slash + 1), reply);
 }
 
 grpc::Status RemoteClient::uploadVolume(const LabelVolume& volume, const std::string& name, v1::UploadReply* reply) {

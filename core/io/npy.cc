@@ -5,12 +5,12 @@
 #include <cctype>
 #include <cerrno>
 #include <cstring>
-#include <fstream>
 #include <limits>
 
 #include <fmt/format.h>
 
 #include "core/grid.h"
+#include "core/io/input_file.h"
 #include "core/io/temp_file.h"
 
 namespace distband {
@@ -265,39 +265,26 @@ Status parseNpy(std::string_view bytes, std::string_view name, NpyArray* out) {
 }
 
 Status readNpy(const std::string& path, NpyArray* out) {
-  errno = 0;
-  std::ifstream f(path, std::ios::binary);
-  if (!f) {
-    const int error = errno;
-    std::string message = fmt::format("{}: cannot open: {}", path, std::strerror(error));
-    if (error == ENOENT || error == ENOTDIR) return Status::NotFound(std::move(message));
-    return Status::IoError(std::move(message));
-  }
-  f.seekg(0, std::ios::end);
-  const std::streamoff file_size = f.tellg();
-  f.seekg(0, std::ios::beg);
-  if (file_size < 0) return Status::IoError(fmt::format("{}: cannot determine the file size", path));
+  InputFile f;
+  if (Status s = InputFile::open(path, &f); !s.ok()) return s;
+  const uint64_t file_size = f.size();
   // The preamble is 10 (v1) or 12 (v2/3) bytes; read what exists and let parsePreamble judge.
-  std::string pre(static_cast<size_t>(std::min<std::streamoff>(file_size, 12)), '\0');
-  f.read(pre.data(), static_cast<std::streamsize>(pre.size()));
-  if (!f) return Status::IoError(fmt::format("{}: read failed", path));
+  std::string pre(size_t(std::min<uint64_t>(file_size, 12)), '\0');
+  if (Status s = f.readAt(0, pre.data(), pre.size()); !s.ok()) return s;
   size_t start = 0, len = 0;
   if (Status s = parsePreamble(pre, path, &start, &len); !s.ok()) return s;
-  if (uint64_t(file_size) < start + len)
+  if (file_size < start + len)
     return Status::InvalidArgument(fmt::format("{}: truncated .npy header ({} bytes declared, {} present)", path, len,
-                                               uint64_t(file_size) - std::min<uint64_t>(start, uint64_t(file_size))));
+                                               file_size - std::min<uint64_t>(start, file_size)));
   std::string header(len, '\0');
-  f.seekg(static_cast<std::streamoff>(start), std::ios::beg);
-  f.read(header.data(), static_cast<std::streamsize>(len));
-  if (!f) return Status::IoError(fmt::format("{}: read failed", path));
+  if (Status s = f.readAt(start, header.data(), len); !s.ok()) return s;
   NpyArray a;
   uint64_t payload = 0;
   if (Status s = parseHeader(header, path, &a, &payload); !s.ok()) return s;
-  const uint64_t have = uint64_t(file_size) - start - len;
+  const uint64_t have = file_size - start - len;
   if (Status s = checkPayloadSize(path, a, payload, have); !s.ok()) return s;
   a.data.resize(payload);
-  f.read(reinterpret_cast<char*>(a.data.data()), static_cast<std::streamsize>(payload));
-  if (!f) return Status::IoError(fmt::format("{}: read failed while loading {} data bytes", path, payload));
+  if (Status s = f.readAt(start + len, a.data.data(), payload); !s.ok()) return s;
   *out = std::move(a);
   return Status::Ok();
 }
@@ -337,7 +324,7 @@ Status readNpyFloat32(const std::string& path, std::vector<float>* values, Coord
   Coord c;
   if (Status s = volumeDims(a, path, &c); !s.ok()) return s;
   std::vector<float> v(a.data.size() / sizeof(float));
-  std::memcpy(v.data(), a.data.data(), v.size() * sizeof(float));
+  if (!v.empty()) std::memcpy(v.data(), a.data.data(), v.size() * sizeof(float));
   *values = std::move(v);
   *dims = c;
   return Status::Ok();

@@ -1,15 +1,13 @@
 #include "core/io/point_cloud.h"
 
-#include <sys/stat.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 
 #include <fmt/format.h>
 
+#include "core/io/input_file.h"
 #include "core/io/npy.h"
 #include "core/io/ply_header.h"
 #include "core/io/text_scan.h"
@@ -32,22 +30,9 @@ class Source {
     return s;
   }
   static Status file(const std::string& path, size_t block, Source* out) {
-    errno = 0;
-    std::FILE* f = std::fopen(path.c_str(), "rb");
-    if (!f) {
-      const int error = errno;
-      std::string m = fmt::format("{}: cannot open: {}", path, std::strerror(error));
-      return error == ENOENT || error == ENOTDIR ? Status::NotFound(std::move(m)) : Status::IoError(std::move(m));
-    }
-    struct stat st {};
-    if (fstat(fileno(f), &st) != 0 || !S_ISREG(st.st_mode)) {
-      std::fclose(f);
-      return Status::InvalidArgument(fmt::format("{}: not a regular file", path));
-    }
-    out->file_.reset(f);
-    out->size_ = uint64_t(st.st_size);
+    if (Status s = InputFile::open(path, &out->file_); !s.ok()) return s;
+    out->size_ = out->file_.size();
     out->block_ = std::max<size_t>(block, 64);
-    out->path_ = path;
     return Status::Ok();
   }
 
@@ -62,7 +47,7 @@ class Source {
     offset_ += n;
   }
   Status fill(size_t want) {
-    if (!file_ || view_.size() >= want || offset_ + view_.size() >= size_) return Status::Ok();
+    if (!file_.get() || view_.size() >= want || offset_ + view_.size() >= size_) return Status::Ok();
     // The unread rest moves to the front; its place is taken before a resize can move the buffer under it.
     const size_t keep = view_.size();
     const size_t at = keep ? size_t(view_.data() - buffer_.data()) : 0;
@@ -70,18 +55,13 @@ class Source {
     if (buffer_.size() < capacity) buffer_.resize(capacity);
     if (keep) std::memmove(buffer_.data(), buffer_.data() + at, keep);
     const size_t ask = size_t(std::min<uint64_t>(capacity - keep, size_ - offset_ - keep));
-    const size_t got = std::fread(buffer_.data() + keep, 1, ask, file_.get());
-    if (got != ask) return Status::IoError(fmt::format("{}: read failed at byte {}", path_, offset_ + keep + got));
-    view_ = std::string_view(buffer_.data(), keep + got);
+    if (Status s = file_.readAt(offset_ + keep, buffer_.data() + keep, ask); !s.ok()) return s;
+    view_ = std::string_view(buffer_.data(), keep + ask);
     return Status::Ok();
   }
 
  private:
-  struct Closer {
-    void operator()(std::FILE* f) const { std::fclose(f); }
-  };
-  std::unique_ptr<std::FILE, Closer> file_;
-  std::string path_;
+  InputFile file_;
   std::string buffer_;
   std::string_view view_;
   uint64_t offset_ = 0, size_ = 0;

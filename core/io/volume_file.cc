@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <limits>
 #include <memory>
 #include <sstream>
@@ -13,6 +12,7 @@
 
 #include <fmt/format.h>
 
+#include "core/io/input_file.h"
 #include "core/io/nifti.h"
 #include "core/io/npy.h"
 #include "core/io/nrrd.h"
@@ -28,30 +28,6 @@ std::string lower(std::string_view s) {
 
 bool endsWith(const std::string& s, std::string_view suffix) {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
-
-/// The whole file, or kNotFound / kIoError.
-Status readWholeFile(const std::string& path, uint64_t max_bytes, std::string* out) {
-  errno = 0;
-  std::ifstream f(path, std::ios::binary);
-  if (!f) {
-    const int error = errno;
-    std::string message = fmt::format("{}: cannot open: {}", path, std::strerror(error));
-    if (error == ENOENT || error == ENOTDIR) return Status::NotFound(std::move(message));
-    return Status::IoError(std::move(message));
-  }
-  f.seekg(0, std::ios::end);
-  const std::streamoff size = f.tellg();
-  f.seekg(0, std::ios::beg);
-  if (size < 0) return Status::IoError(fmt::format("{}: cannot determine the file size", path));
-  if (uint64_t(size) > max_bytes)
-    return Status::ResourceExhausted(
-        fmt::format("{}: {} bytes are more than a volume of the limits holds", path, size));
-  std::string bytes(size_t(size), '\0');
-  f.read(bytes.data(), size);
-  if (!f) return Status::IoError(fmt::format("{}: read failed", path));
-  *out = std::move(bytes);
-  return Status::Ok();
 }
 
 template <class T>
@@ -256,7 +232,7 @@ Status readVolumeFile(const std::string& path, const VolumeReadLimits& limits, V
   // The largest file a volume of the limits can come in (uncompressed, 8-byte elements, a generous header).
   const uint64_t max_bytes = limits.max_voxels * 8 + (uint64_t(1) << 20);
   std::string bytes;
-  if (Status s = readWholeFile(path, max_bytes, &bytes); !s.ok()) return s;
+  if (Status s = readWholeFile(path, max_bytes, "a volume", &bytes); !s.ok()) return s;
   if (*format == VolumeFileFormat::kNifti) return parseNifti(bytes, path, limits, out);
   // An .nhdr's data file: a plain file name beside the header, nothing else.
   const std::filesystem::path dir = std::filesystem::path(path).parent_path();
@@ -265,7 +241,7 @@ Status readVolumeFile(const std::string& path, const VolumeReadLimits& limits, V
     if (file.empty() || p.has_parent_path() || p.is_absolute() || file == "." || file == "..")
       return Status::InvalidArgument(
           fmt::format("{}: data file '{}': only a file beside the header is read", path, file.substr(0, 64)));
-    return readWholeFile((dir / p).string(), max, data);
+    return readWholeFile((dir / p).string(), max, "a volume", data);
   };
   return parseNrrd(bytes, path, limits, &detached, out);
 }

@@ -1,17 +1,15 @@
 #include "core/mesh/triangle_mesh.h"
 
-#include <sys/stat.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <numeric>
 
 #include <fmt/format.h>
 #include <tbb/parallel_sort.h>
 
 #include "core/interruptible.h"
+#include "core/io/input_file.h"
 #include "core/mesh/mesh_reader.h"
 
 namespace distband {
@@ -137,16 +135,9 @@ Status loadMesh(const std::string& path, TriangleMesh* mesh, MeshReport* report)
   MeshFormat format;
   if (!meshFormatFromPath(path, &format))
     return fail("unsupported mesh format (expected .obj, .off, .ply or .stl)");
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return Status::NotFound(fmt::format("{}: no such file", path));
-  if (!S_ISREG(st.st_mode)) return fail("not a regular file");
-  if (st.st_size == 0) return fail("the file is empty");
-  if (uint64_t(st.st_size) > kMaxMeshFileBytes)
-    return fail(fmt::format("the file has {} bytes, more than the {} a mesh may have", st.st_size, kMaxMeshFileBytes));
-  std::string bytes(size_t(st.st_size), '\0');
-  std::ifstream in(path, std::ios::binary);
-  if (!in.read(bytes.data(), std::streamsize(bytes.size())))
-    return Status::IoError(fmt::format("{}: cannot read the file", path));
+  std::string bytes;
+  if (Status s = readWholeFile(path, kMaxMeshFileBytes, "a mesh", &bytes); !s.ok()) return s;
+  if (bytes.empty()) return fail("the file is empty");
   MeshReadLimits limits;
   TriangleMesh loaded;
   MeshReport r;

@@ -163,7 +163,7 @@ TEST_F(MeshLoadingTest, EmptyMissingAndUnsupportedFilesAreClearErrors) {
   expectError(write("empty.obj", ""), "empty");
   expectError(write("comments.obj", "# nothing here\n"), "no triangles");
   expectError(write("points.obj", "v 0 0 0\nv 1 0 0\n"), "no triangles");
-  expectError((dir_ / "missing.obj").string(), "no such file", Status::Code::kNotFound);
+  expectError((dir_ / "missing.obj").string(), "cannot open: No such file", Status::Code::kNotFound);
   expectError(write("mesh.xyz", kTetObj), "unsupported mesh format");
   expectError(write("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n"), "degenerate");
 }
