@@ -10,66 +10,26 @@ meshes (byte for byte).
 """
 import io
 import os
-import re
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 import unittest
 
 import numpy as np
 from scipy import ndimage
+from server_process import ServerProcess
 
 import distband_client
 from distband_client import DistbandError
 from distband_client.assemble import FieldAssembler
 from distband_client.stubs import pb
 
-SERVER = os.environ["DISTBAND_SERVER_BINARY"]
 CLI = os.environ["DISTBAND_CLI_BINARY"]
 SOURCE = os.environ["DISTBAND_SOURCE_DIR"]
 BUNNY = os.path.join(SOURCE, "tests", "data", "meshes", "bunny.obj")
 TOKEN = "python-client-test-token-0123456789"
 UNUSED_TARGET = "127.0.0.1:1"  # nothing listens on port 1: a request that got that far would fail to connect
-
-
-class ServerProcess:
-    """distband-server on 127.0.0.1, any free port (read from its "(port N," listening line)."""
-
-    def __init__(self, *args):
-        self.proc = subprocess.Popen([SERVER, "--listen", "127.0.0.1:0", "--threads", "2", *args],
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.lines = []
-        self._port = threading.Event()
-        self.port = None
-        threading.Thread(target=self._read, daemon=True).start()
-        if not self._port.wait(15):
-            self.stop()
-            raise RuntimeError("distband-server did not report its port:\n" + self.log())
-
-    def _read(self):
-        for line in self.proc.stdout:
-            self.lines.append(line)
-            m = re.search(r"\(port (\d+),", line)
-            if m and self.port is None:
-                self.port = int(m.group(1))
-                self._port.set()
-
-    def log(self):
-        return "".join(self.lines)
-
-    @property
-    def target(self):
-        return f"127.0.0.1:{self.port}"
-
-    def stop(self):
-        self.proc.terminate()
-        try:
-            self.proc.wait(20)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
 
 
 def voxel_centres(header):

@@ -15,12 +15,12 @@ import os
 import re
 import subprocess
 import tempfile
-import threading
 import unittest
 
 import nibabel as nib
 import numpy as np
 from scipy import ndimage
+from server_process import ServerProcess
 
 CLI = os.environ["DISTBAND_CLI_BINARY"]
 SERVER = os.environ.get("DISTBAND_SERVER_BINARY")
@@ -84,40 +84,6 @@ def run(*args):
 
 def rel_err(a, b):
     return float(np.max(np.abs(a.astype(np.float64) - b) / (1.0 + np.abs(b))))
-
-
-class ServerProcess:
-    """distband-server on 127.0.0.1, any free port (read from its "(port N," listening line)."""
-
-    def __init__(self, *args):
-        self.proc = subprocess.Popen([SERVER, "--listen", "127.0.0.1:0", "--threads", "2", *args],
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.lines = []
-        self.port = None
-        self._ready = threading.Event()
-        threading.Thread(target=self._read, daemon=True).start()
-        if not self._ready.wait(15):
-            self.stop()
-            raise RuntimeError("distband-server did not report its port:\n" + "".join(self.lines))
-
-    def _read(self):
-        for line in self.proc.stdout:
-            self.lines.append(line)
-            m = re.search(r"\(port (\d+),", line)
-            if m and self.port is None:
-                self.port = int(m.group(1))
-                self._ready.set()
-
-    @property
-    def target(self):
-        return f"127.0.0.1:{self.port}"
-
-    def stop(self):
-        self.proc.terminate()
-        try:
-            self.proc.wait(10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
 
 
 class VolumeFilesThroughTheCli(unittest.TestCase):
