@@ -55,6 +55,71 @@ bool AssetCache::insert(std::shared_ptr<const Asset> asset) {
   return true;
 }
 
+bool AssetCache::keepSearchParts(const std::shared_ptr<const Asset>& asset, const PointSearch& search) {
+  std::lock_guard lock(mu_);
+  auto it = index_.find(asset->id);
+  if (it == index_.end() || it->second->asset != asset) return false;
+  const uint64_t bytes = asset->search_parts->bytesToKeep(search);
+  if (bytes == 0) return true;
+  if (it->second->bytes + bytes > capacity_) return false;
+  // Make room from the least recently used end, never evicting the asset the parts belong to.
+  auto victim = lru_.end();
+  while (used_ + bytes > capacity_ && victim != lru_.begin()) {
+    --victim;
+    if (victim == it->second) continue;
+    used_ -= victim->bytes;
+    index_.erase(victim->asset->id);
+    victim = lru_.erase(victim);
+  }
+  asset->search_parts->keep(search);
+  it->second->bytes += bytes;
+  used_ += bytes;
+  return true;
+}
+
+std::shared_ptr<const MeshSign> AssetSearchParts::keptSign(SignMethod method) const {
+  for (const auto& kept : signs_)
+    if (kept->method() == method) return kept;
+  return nullptr;
+}
+
+PointSearch AssetSearchParts::forPlan(const PointPlan& plan) const {
+  std::lock_guard lock(mu_);
+  PointSearch s;
+  s.seeds = plan.seeds;
+  if (plan.seeds == SeedKind::kMesh) {
+    s.mesh = mesh_;
+    if (plan.mesh_sign != SignMethod::kUnsigned) s.sign = keptSign(plan.mesh_sign);
+    if (plan.farSign() != SignMethod::kUnsigned) s.far_sign = keptSign(plan.farSign());
+  } else if (plan.seeds == SeedKind::kVolume) {
+    s.volume = volume_[volumeSlot(plan.inside_negative)];
+  }
+  return s;
+}
+
+uint64_t AssetSearchParts::bytesToKeep(const PointSearch& search) const {
+  std::lock_guard lock(mu_);
+  uint64_t bytes = 0;
+  if (search.mesh && !mesh_) bytes += search.mesh->memoryBytes();
+  if (search.sign && !keptSign(search.sign->method())) bytes += search.sign->memoryBytes();
+  if (search.far_sign && !keptSign(search.far_sign->method()) &&
+      !(search.sign && search.sign->method() == search.far_sign->method()))
+    bytes += search.far_sign->memoryBytes();
+  if (search.volume && !volume_[volumeSlot(search.volume->insideNegative())]) bytes += search.volume->memoryBytes();
+  return bytes;
+}
+
+void AssetSearchParts::keep(const PointSearch& search) {
+  std::lock_guard lock(mu_);
+  if (search.mesh && !mesh_) mesh_ = search.mesh;
+  for (const auto& sign : {search.sign, search.far_sign})
+    if (sign && !keptSign(sign->method())) signs_.push_back(sign);
+  if (search.volume) {
+    auto& slot = volume_[volumeSlot(search.volume->insideNegative())];
+    if (!slot) slot = search.volume;
+  }
+}
+
 uint64_t AssetCache::usedBytes() const {
   std::lock_guard lock(mu_);
   return used_;

@@ -674,6 +674,7 @@ Status DistanceFieldService::runPoints(grpc::ServerContext* context, ActiveCalls
   const auto t0 = Clock::now();
   Interrupter& interrupter = call.interrupter();
   std::string label = "-";
+  std::string_view search_state = "-";  // "built" or "cached" once the search is ready
   uint64_t points = 0, chunks = 0, beyond = 0;
   auto log = [&](const Status& s) {
     callLine("QueryPoints", rid, "query", id)
@@ -681,6 +682,7 @@ Status DistanceFieldService::runPoints(grpc::ServerContext* context, ActiveCalls
         .text("seeds", label)
         .number("points", points)
         .number("chunks", chunks)
+        .text("search", search_state)
         .seconds("time", since(t0))
         .status(s)
         .write();
@@ -728,7 +730,9 @@ Status DistanceFieldService::runPoints(grpc::ServerContext* context, ActiveCalls
 
   // Admission: the search's peak bytes and one chunk's buffers (the points, the results, the packed reply).
   const uint64_t chunk_bytes = uint64_t(kMaxChunkPoints) * (24 + 8 + 24 + 8 + 24) * 2;
-  const uint64_t peak = pointSearchBytes(p.plan, p.counts, PointSearch{}) + chunk_bytes + options_.stream_buffer_bytes;
+  // The search: the parts a cached asset keeps, completed with what this plan still needs (then kept for the next).
+  PointSearch search = p.cached ? p.asset->search_parts->forPlan(p.plan) : PointSearch{};
+  const uint64_t peak = pointSearchBytes(p.plan, p.counts, search) + chunk_bytes + options_.stream_buffer_bytes;
   MemoryBudget::Reservation memory;
   ComputeSlot slot;
   if (Status s = admitWork(context, call, peak, fmt::format("the point query on {}", p.seeds_label), &memory, &slot);
@@ -745,11 +749,15 @@ Status DistanceFieldService::runPoints(grpc::ServerContext* context, ActiveCalls
   } else {
     source.points = &p.points;
   }
-  PointSearch search;
+  const PointSearch kept = search;
   if (Status s = runCompute(context, call, [&] { return completePointSearch(p.plan, source, &interrupter, &search); });
       !s.ok())
     return log(s);
   const double search_seconds = since(t_search);
+  const bool search_cached = search.mesh == kept.mesh && search.sign == kept.sign && search.far_sign == kept.far_sign &&
+                             search.points == kept.points && search.volume == kept.volume;
+  if (p.cached && !search_cached) cache_.keepSearchParts(p.asset, search);
+  search_state = search_cached ? "cached" : "built";
   {
     v1::PointsReply reply;
     fillPointsHeader(p, id, reply.mutable_header());
@@ -796,7 +804,7 @@ Status DistanceFieldService::runPoints(grpc::ServerContext* context, ActiveCalls
   s->set_points(points);
   s->set_chunks(chunks);
   s->set_beyond_limit(beyond);
-  s->set_search_cached(false);
+  s->set_search_cached(search_cached);
   s->set_search_seconds(search_seconds);
   s->set_compute_seconds(compute_seconds);
   s->set_queue_seconds(queue_seconds);

@@ -396,6 +396,62 @@ TEST(PointsTest, CancellingMidStreamStopsTheServerWithin100msAndItKeepsServing) 
   EXPECT_EQ(results, 1);
 }
 
+TEST(PointsTest, AnUploadedAssetKeepsItsSearchSoOnlyTheFirstQueryBuildsIt) {
+  TestServer server;
+  TriangleMesh mesh;
+  MeshReport report;
+  ASSERT_TRUE(loadMesh(kBunny, &mesh, &report).ok());
+  v1::UploadReply up;
+  ASSERT_TRUE(server.client().uploadMeshFile(kBunny, &up).ok());
+  AssetCache& cache = server.server().service().cache();
+  const std::vector<Vec3d> at = samplePoints(mesh, 3000, 5);
+  auto run = [&](v1::SignMode sign, std::vector<double>* d) {
+    v1::PointsHeader h;
+    h.set_asset_id(up.asset_id());
+    h.set_sign(sign);
+    h.set_limit(0.02);  // a finite limit: pseudonormal signs need the winding number beyond it too
+    h.set_coordinates(v1::VALUE_TYPE_FLOAT64);
+    bool sent = false;
+    d->clear();
+    RemotePointsCallbacks cb;
+    cb.next_chunk = [&](std::string* xyz) {
+      if (sent) return false;
+      sent = true;
+      *xyz = packXyz(at, true);
+      return true;
+    };
+    cb.on_results = [&](const v1::PointsResults& r) {
+      d->resize(d->size() + r.points());
+      std::memcpy(d->data() + d->size() - r.points(), r.distance().data(), 8 * r.points());
+      return true;
+    };
+    const RemotePointsResult result = server.client().queryPoints(h, cb);
+    EXPECT_TRUE(result.status.ok()) << result.status.error_message();
+    return result.summary.search_cached();
+  };
+  std::vector<double> first, second, winding, winding_again;
+  const uint64_t asset_bytes = cache.usedBytes();
+  EXPECT_FALSE(run(v1::SIGN_MODE_PSEUDONORMAL, &first)) << "the first query builds the search";
+  const uint64_t with_search = cache.usedBytes();
+  EXPECT_GT(with_search, asset_bytes) << "the kept search is charged to the cache";
+  EXPECT_TRUE(run(v1::SIGN_MODE_PSEUDONORMAL, &second)) << "the second finds it kept";
+  EXPECT_EQ(cache.usedBytes(), with_search);
+  EXPECT_EQ(first, second);
+  // Winding was built as the far sign of the pseudonormal plan: a winding query finds everything kept.
+  EXPECT_TRUE(run(v1::SIGN_MODE_WINDING, &winding));
+  EXPECT_FALSE(run(v1::SIGN_MODE_PARITY, &winding_again)) << "a sign method not kept yet is built";
+  EXPECT_GT(cache.usedBytes(), with_search);
+  EXPECT_TRUE(run(v1::SIGN_MODE_PARITY, &winding_again));
+  ASSERT_EQ(first.size(), at.size());
+  ASSERT_EQ(winding.size(), at.size());
+  int sign_differences = 0;
+  for (size_t i = 0; i < at.size(); ++i) {
+    EXPECT_EQ(std::abs(first[i]), std::abs(winding[i])) << i;
+    sign_differences += (first[i] < 0) != (winding[i] < 0);
+  }
+  EXPECT_LE(sign_differences, 3) << "bunny is closed: both signs agree but for points on the surface";
+}
+
 TEST(PointsTest, AtRefusesBadFlagsBeforeAnyTraffic) {
   TestServer server;
   CliFixture f;

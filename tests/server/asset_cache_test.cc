@@ -1,6 +1,7 @@
 // AssetCache and sha256Hex (server/asset_cache.h): content lookup, LRU eviction by bytes (find() and a repeated
 // insert() refresh recency), refusal of an asset larger than the whole capacity (nothing evicted for it), evicted
-// assets staying alive for their holders, the SHA-256 known answers (FIPS 180-2) and a two-thread smoke test.
+// assets staying alive for their holders, point-search parts charged to their asset, the SHA-256 known answers (FIPS
+// 180-2) and a two-thread smoke test.
 #include "server/asset_cache.h"
 
 #include <future>
@@ -164,6 +165,69 @@ TEST(AssetCacheTest, MeshAssetsCostTheirVertices) {
 }
 
 // FIPS 180-2 appendix B known answers.
+/// A point search holding a BVH over a small mesh: a part whose memoryBytes() the cache must charge.
+PointSearch meshSearch() {
+  TriangleMesh mesh;
+  for (int i = 0; i < 40; ++i) {
+    const int32_t v = int32_t(mesh.vertices.size());
+    mesh.vertices.push_back({double(i), 0, 0});
+    mesh.vertices.push_back({double(i) + 1, 0, 0});
+    mesh.vertices.push_back({double(i), 1, 0});
+    mesh.triangles.push_back({v, v + 1, v + 2});
+  }
+  auto bvh = std::make_shared<TriangleBvh>();
+  EXPECT_TRUE(TriangleBvh::build(mesh, nullptr, bvh.get()).ok());
+  PointSearch search;
+  search.mesh = std::move(bvh);
+  return search;
+}
+
+TEST(AssetCacheTest, KeptSearchPartsAreChargedToTheirAssetAndMakeRoomLikeAnInsert) {
+  const PointSearch search = meshSearch();
+  const uint64_t part = search.mesh->memoryBytes();
+  ASSERT_GT(part, 0u);
+  const size_t mask = 2 * part;  // an asset costs more than the part: evicting one makes room for one part
+  const uint64_t unit = volume("volume-a", mask)->memoryBytes();
+  AssetCache cache(3 * unit + part);
+  auto a = volume("volume-a", mask), b = volume("volume-b", mask), c = volume("volume-c", mask);
+  ASSERT_TRUE(cache.insert(a) && cache.insert(b) && cache.insert(c));
+  cache.find("volume-a");  // b is now the least recently used, then c, then a
+  PointPlan plan;
+  EXPECT_EQ(a->search_parts->forPlan(plan).mesh, nullptr);
+  ASSERT_TRUE(cache.keepSearchParts(a, search));
+  EXPECT_EQ(a->search_parts->forPlan(plan).mesh, search.mesh) << "kept: the next plan finds it";
+  EXPECT_EQ(cache.usedBytes(), 3 * unit + part) << "fits without evicting";
+  EXPECT_TRUE(cache.keepSearchParts(a, search)) << "kept once, charged once";
+  EXPECT_EQ(cache.usedBytes(), 3 * unit + part);
+
+  // Another asset's parts make room from the least recently used end: b goes, a (just used) and c stay.
+  ASSERT_TRUE(cache.keepSearchParts(c, search));
+  EXPECT_EQ(cache.find("volume-b"), nullptr);
+  EXPECT_NE(cache.find("volume-a"), nullptr);
+  EXPECT_EQ(cache.usedBytes(), 2 * unit + 2 * part);
+  // An asset leaves with its parts and their bytes: a new asset evicts c (the least recently used) and its part.
+  ASSERT_TRUE(cache.insert(volume("volume-d", mask)));
+  EXPECT_EQ(cache.find("volume-c"), nullptr);
+  EXPECT_EQ(cache.usedBytes(), 2 * unit + part);
+}
+
+TEST(AssetCacheTest, SearchPartsOfAnAssetNotCachedOrTooLargeAreNotKept) {
+  const PointSearch search = meshSearch();
+  const uint64_t part = search.mesh->memoryBytes();
+  AssetCache cache(unitBytes() + part - 1);
+  auto a = volume("volume-a", kMask);
+  ASSERT_TRUE(cache.insert(a));
+  EXPECT_FALSE(cache.keepSearchParts(a, search)) << "the asset and its parts exceed the capacity";
+  EXPECT_EQ(a->search_parts->forPlan(PointPlan{}).mesh, nullptr);
+  EXPECT_EQ(cache.usedBytes(), unitBytes());
+  EXPECT_NE(cache.find("volume-a"), nullptr) << "nothing evicted for a refusal";
+  auto inline_asset = volume("volume-a", kMask);  // the same id, but not the cache's object (an inline upload)
+  EXPECT_FALSE(cache.keepSearchParts(inline_asset, search));
+  auto never = volume("volume-z", kMask);
+  EXPECT_FALSE(cache.keepSearchParts(never, search));
+  EXPECT_EQ(cache.usedBytes(), unitBytes());
+}
+
 TEST(Sha256HexTest, KnownAnswers) {
   EXPECT_EQ(sha256Hex({"abc"}), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
   EXPECT_EQ(sha256Hex({""}), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
