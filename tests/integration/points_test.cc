@@ -478,6 +478,48 @@ TEST(PointsTest, AtRefusesBadFlagsBeforeAnyTraffic) {
   EXPECT_FALSE(fs::exists(f.path("d.txt")));
 }
 
+TEST(PointsTest, AMillionSeedPointsFromEveryFileFormatGiveTheFieldOfTheSamePointsInline) {
+  CliFixture f;
+  constexpr size_t kSeeds = 1000000;
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(-2, 66);  // some outside the grid, as real clouds have
+  std::vector<Vec3d> seeds(kSeeds);
+  for (Vec3d& p : seeds) p = {u(rng), u(rng), u(rng)};
+  std::string inline_points, xyz;
+  inline_points.reserve(kSeeds * 64);
+  xyz.reserve(kSeeds * 64);
+  for (const Vec3d& p : seeds) {  // shortest round-trip text: the file and the flag hold the same doubles
+    fmt::format_to(std::back_inserter(inline_points), "{}{},{},{}", inline_points.empty() ? "" : ";", p.x, p.y, p.z);
+    fmt::format_to(std::back_inserter(xyz), "{} {} {}\n", p.x, p.y, p.z);
+  }
+  std::ofstream(f.path("s.xyz")) << xyz;
+  std::ofstream(f.path("s.npy"), std::ios::binary) << npyPoints(seeds);
+  {  // binary little-endian PLY with an extra property per vertex, as scanners write
+    std::ofstream ply(f.path("s.ply"), std::ios::binary);
+    ply << "ply\nformat binary_little_endian 1.0\nelement vertex " << kSeeds
+        << "\nproperty double x\nproperty double y\nproperty double z\nproperty uchar intensity\nend_header\n";
+    for (const Vec3d& p : seeds) {
+      ply.write(reinterpret_cast<const char*>(&p), sizeof p);
+      ply.put(char(7));
+    }
+  }
+  const std::vector<std::string> grid = {"--dims", "64,64,64", "--limit", "3", "--closest", ""};
+  auto compute = [&](std::vector<std::string> seed_flags, const std::string& out) {
+    std::vector<std::string> args = {"compute"};
+    args.insert(args.end(), seed_flags.begin(), seed_flags.end());
+    args.insert(args.end(), grid.begin(), grid.end());
+    args.back() = f.path((out + "_ids.npy").c_str());
+    args.insert(args.end(), {"--out", f.path((out + ".npy").c_str())});
+    EXPECT_EQ(f.run(args), 0) << f.err.str();
+    return readFile(f.path((out + ".npy").c_str())) + readFile(f.path((out + "_ids.npy").c_str()));
+  };
+  const std::string reference = compute({"--points", inline_points}, "inline");
+  ASSERT_GT(reference.size(), 64u * 64 * 64 * 4);
+  EXPECT_TRUE(compute({"--points-file", f.path("s.xyz")}, "xyz") == reference) << ".xyz";
+  EXPECT_TRUE(compute({"--points-file", f.path("s.npy")}, "npy") == reference) << ".npy";
+  EXPECT_TRUE(compute({"--points-file", f.path("s.ply")}, "ply") == reference) << ".ply";
+}
+
 TEST(PointsTest, SeedPointFilesGiveTheFieldOfTheSamePointsInline) {
   CliFixture f;
   const std::vector<Vec3d> seeds = {{3.25, 4.5, 5}, {10, 2.125, 7.5}, {6, 12, 1.75}, {0.5, 0.5, 14}};
