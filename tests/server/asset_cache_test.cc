@@ -169,7 +169,7 @@ TEST(AssetCacheTest, MeshAssetsCostTheirVertices) {
 PointSearch meshSearch() {
   TriangleMesh mesh;
   for (int i = 0; i < 40; ++i) {
-    const int32_t v = int32_t(mesh.vertices.size());
+    const uint32_t v = uint32_t(mesh.vertices.size());
     mesh.vertices.push_back({double(i), 0, 0});
     mesh.vertices.push_back({double(i) + 1, 0, 0});
     mesh.vertices.push_back({double(i), 1, 0});
