@@ -17,6 +17,7 @@
 #include "server/asset_parsing.h"
 #include "server/grpc_status.h"
 #include "server/log_line.h"
+#include "server/points_fan_out.h"
 #include "server/query_job.h"
 #include "server/request_validation.h"
 #include "server/tiled_query.h"
@@ -676,16 +677,15 @@ Status DistanceFieldService::runPoints(grpc::ServerContext* context, ActiveCalls
   std::string label = "-";
   std::string_view search_state = "-";  // "built" or "cached" once the search is ready
   uint64_t points = 0, chunks = 0, beyond = 0;
+  std::optional<uint64_t> replicas;  // a coordinator's: the replica streams the chunks went to
   auto log = [&](const Status& s) {
-    callLine("QueryPoints", rid, "query", id)
-        .text("peer", context->peer())
-        .text("seeds", label)
-        .number("points", points)
-        .number("chunks", chunks)
-        .text("search", search_state)
-        .seconds("time", since(t0))
-        .status(s)
-        .write();
+    LogLine line = callLine("QueryPoints", rid, "query", id);
+    line.text("peer", context->peer()).text("seeds", label).number("points", points).number("chunks", chunks);
+    if (replicas)
+      line.number("replicas", *replicas);
+    else
+      line.text("search", search_state);
+    line.seconds("time", since(t0)).status(s).write();
     return s;
   };
   auto gone = [&] {
@@ -711,10 +711,6 @@ Status DistanceFieldService::runPoints(grpc::ServerContext* context, ActiveCalls
   if (!read()) return log(gone());
   if (request.kind_case() != v1::PointsRequest::kHeader)
     return log(Status::InvalidArgument("header: the first message of a QueryPoints stream must be a header"));
-  if (pool_)
-    return log(Status::InvalidArgument(
-        "QueryPoints: this server is a coordinator, and point chunks do not fan out to replicas yet; send the "
-        "points to a replica"));
   const v1::PointsHeader header = request.header();
   std::shared_ptr<const Asset> inline_mesh;
   if (Status s = checkInlineMesh(header, options_); !s.ok()) return log(s.withPrefix("header"));
@@ -727,6 +723,36 @@ Status DistanceFieldService::runPoints(grpc::ServerContext* context, ActiveCalls
   if (Status s = resolvePointsHeader(header, options_, cache_, std::move(inline_mesh), &p); !s.ok())
     return log(s.code() == Status::Code::kInvalidArgument ? s.withPrefix("header") : s);
   label = p.seeds_label;
+  if (pool_) {
+    // A coordinator: the chunks fan out to the replicas (server/points_fan_out.h), admitted with what it holds of
+    // their results.
+    const size_t streams = PointsFanOut::streamsFor(pool_->replicas().size());
+    MemoryBudget::Reservation memory;
+    ComputeSlot slot;
+    if (Status s =
+            admitWork(context, call, PointsFanOut::reservedBytes(p, streams),
+                      fmt::format("the point query on {} over {} replicas", p.seeds_label, streams), &memory, &slot);
+        !s.ok())
+      return log(s);
+    const double queue_seconds = since(t0);
+    PointsFanOut fan_out(p, {options_, *pool_, interrupter, *context, *stream,
+                             [&call](bool waiting) { call.waitingForClient(waiting); }, rid.id});
+    v1::PointsReply reply;
+    fillPointsHeader(p, id, reply.mutable_header());
+    Status s = fan_out.open(reply.header());
+    if (s.ok()) s = fan_out.serve();
+    points = fan_out.points();
+    chunks = fan_out.chunks();
+    replicas = fan_out.streams();
+    if (!s.ok()) return log(s);
+    reply.Clear();
+    v1::PointsSummary* summary = reply.mutable_summary();
+    fan_out.summarize(summary);
+    summary->set_queue_seconds(queue_seconds + summary->queue_seconds());
+    summary->set_total_seconds(since(t0));
+    if (!write(reply)) return log(gone());
+    return log(Status::Ok());
+  }
 
   // Admission: the search's peak bytes and one chunk's buffers (the points, the results, the packed reply).
   const uint64_t chunk_bytes = uint64_t(kMaxChunkPoints) * (24 + 8 + 24 + 8 + 24) * 2;

@@ -74,8 +74,9 @@ class DistanceFieldService final : public v1::DistanceField::Service {
   /// Distances at points (see QueryPoints in the .proto): the header is validated before any work, the search is
   /// built under admission (its bytes reserved, a compute slot held for the stream), then each chunk is read,
   /// decoded (INVALID_ARGUMENT naming the chunk and the point), computed on a compute thread in the arena and
-  /// answered before the next is read: one chunk in memory, the client paused by flow control. A coordinator
-  /// refuses it (INVALID_ARGUMENT, as a tile sent to one: the chunks do not fan out to replicas yet).
+  /// answered before the next is read: one chunk in memory, the client paused by flow control. A coordinator validates
+  /// the header alike, then fans the chunks out to its replicas and merges their results back in the client's order
+  /// (server/points_fan_out.h), admitted with the results it may hold.
   grpc::Status QueryPoints(grpc::ServerContext* context,
                            grpc::ServerReaderWriter<v1::PointsReply, v1::PointsRequest>* stream) override;
 

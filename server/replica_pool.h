@@ -89,6 +89,38 @@ class ReplicaPool {
   std::thread health_thread_;
 };
 
+/// The calls one coordinated query makes to its replicas (a tiled query's tiles, a point query's streams, the seeds'
+/// uploads of both): each is prepared alike (credentials, a deadline, the query's x-request-id) and cancelled with
+/// the others when the query stops. TileDispatcher and PointsFanOut are ones; SeedShipper's uploads go through them.
+class ReplicaCalls {
+ public:
+  /// Keeps `context` prepared and cancellable with the query's calls for its scope.
+  class Call {
+   public:
+    Call(ReplicaCalls& calls, grpc::ClientContext* context) : calls_(calls), context_(context) {
+      calls_.enroll(context_);
+    }
+    ~Call() { calls_.withdraw(context_); }
+    Call(const Call&) = delete;
+    Call& operator=(const Call&) = delete;
+
+   private:
+    ReplicaCalls& calls_;
+    grpc::ClientContext* context_;
+  };
+
+  virtual ~ReplicaCalls() = default;
+  /// Why calls must not start now (the query stopped or failed); OK while they may.
+  virtual Status stopReason() const = 0;
+  /// The query's request id (server/request_id.h), for the replicas and the log lines of its calls.
+  virtual const std::string& requestId() const = 0;
+
+ protected:
+  /// Prepares `context` and cancels it with the query's calls until withdraw(context).
+  virtual void enroll(grpc::ClientContext* context) = 0;
+  virtual void withdraw(grpc::ClientContext* context) = 0;
+};
+
 /// The addresses a target names, each as a single-address gRPC target ("ipv4:a:p" / "ipv6:[a]:p"); DNS names are
 /// resolved with getaddrinfo. Empty with `error` set when the target is malformed or nothing resolves.
 std::vector<std::string> resolveReplicaAddresses(const std::string& target, std::string* error);

@@ -46,11 +46,12 @@ double dist2ToBox(const Vec3d& p, const VoxelBox& b) {
 }
 
 template <typename Chunk>
-Status streamUpload(std::unique_ptr<grpc::ClientWriter<Chunk>> writer, const std::string& bytes, Chunk first,
+Status streamUpload(std::unique_ptr<grpc::ClientWriter<Chunk>> writer, std::string_view bytes, Chunk first,
                     const v1::UploadReply& reply, const std::string& id) {
   for (size_t off = 0; off == 0 || off < bytes.size(); off += kUploadChunkBytes) {
     Chunk chunk = off == 0 ? first : Chunk();
-    chunk.set_data(bytes.substr(off, kUploadChunkBytes));
+    const std::string_view piece = bytes.substr(off, kUploadChunkBytes);
+    chunk.set_data(piece.data(), piece.size());
     if (!writer->Write(chunk)) break;
   }
   writer->WritesDone();
@@ -63,10 +64,93 @@ Status streamUpload(std::unique_ptr<grpc::ClientWriter<Chunk>> writer, const std
 
 }  // namespace
 
+ShippedMesh canonicalMesh(const Asset& mesh) {
+  ShippedMesh m;
+  m.bytes = encodeBinaryPly(*mesh.mesh);
+  m.id = meshAssetId(m.bytes, v1::MESH_FORMAT_PLY);
+  m.name = mesh.name.substr(0, 200);
+  return m;
+}
+
+Status ReplicaUploads::uploadMesh(const ShippedMesh& mesh, const std::vector<ReplicaPool::Replica>& replicas,
+                                  ReplicaCalls& calls) {
+  return upload(mesh.id, replicas, calls, [&](v1::DistanceField::Stub& stub, grpc::ClientContext* context) {
+    v1::UploadReply reply;
+    v1::UploadMeshChunk first;
+    first.mutable_header()->set_format(v1::MESH_FORMAT_PLY);
+    first.mutable_header()->set_total_bytes(mesh.bytes.size());
+    first.mutable_header()->set_name(mesh.name);
+    return streamUpload(stub.UploadMesh(context, &reply), mesh.bytes, first, reply, mesh.id);
+  });
+}
+
+Status ReplicaUploads::uploadVolume(const v1::Dims& dims, VoxelType type, std::string_view bytes, const std::string& id,
+                                    const std::vector<ReplicaPool::Replica>& replicas, ReplicaCalls& calls) {
+  return upload(id, replicas, calls, [&](v1::DistanceField::Stub& stub, grpc::ClientContext* context) {
+    v1::UploadReply reply;
+    v1::UploadVolumeChunk first;
+    *first.mutable_header()->mutable_dims() = dims;
+    first.mutable_header()->set_element_type(v1VoxelType(type));
+    return streamUpload(stub.UploadVolume(context, &reply), bytes, first, reply, id);
+  });
+}
+
+bool ReplicaUploads::holds(const std::string& replica, const std::string& id) const {
+  std::lock_guard lock(mu_);
+  return uploaded_.count({replica, id}) > 0;
+}
+
+void ReplicaUploads::forget() {
+  std::lock_guard lock(mu_);
+  uploaded_.clear();
+}
+
+Status ReplicaUploads::upload(const std::string& id, const std::vector<ReplicaPool::Replica>& replicas,
+                              ReplicaCalls& calls, const Upload& upload) {
+  int present = 0;
+  std::string last_error = "no replica resolves";
+  for (const ReplicaPool::Replica& r : replicas) {
+    if (Status stopped = calls.stopReason(); !stopped.ok()) return stopped;
+    if (holds(r.address, id)) {
+      ++present;
+      continue;
+    }
+    auto stub = v1::DistanceField::NewStub(r.channel);
+    grpc::ClientContext context;
+    Status s;
+    {
+      ReplicaCalls::Call call(calls, &context);
+      s = upload(*stub, &context);
+    }
+    std::lock_guard lock(mu_);
+    if (s.ok()) {
+      uploaded_.insert({r.address, id});
+      ++present;
+    } else {
+      last_error = fmt::format("{}: {} {}", r.address, Status::codeName(s.code()), s.message());
+      LogLine("SeedUpload")
+          .text("request_id", calls.requestId())
+          .text("asset", id.substr(0, 17))
+          .text("replica", r.address)
+          .status(s)
+          .write(spdlog::level::warn);
+    }
+  }
+  // A replica that missed it answers NOT_FOUND to a tile, which uploads again and retries.
+  if (present > 0) return Status::Ok();
+  return Status::Unavailable(
+      fmt::format("could not pass the seeds on to any replica of --peers {} ({})", pool_.target(), last_error));
+}
+
 SeedShipper::SeedShipper(const ResolvedQuery& query, const ServerOptions& options, ReplicaPool& pool,
                          const std::vector<TilePlan>& tiles)
-    : query_(query), options_(options), pool_(pool), tiles_(tiles), point_index_(tiles.size()),
-      mesh_reach_(meshReach()) {
+    : query_(query),
+      options_(options),
+      pool_(pool),
+      tiles_(tiles),
+      point_index_(tiles.size()),
+      mesh_reach_(meshReach()),
+      uploads_(pool) {
   if (query_.seed_kind != ResolvedQuery::SeedKind::kPoints) return;
   // Only points that can reach the tile within the limit, in their original order (ties go to the lower index).
   const double reach = query_.plan.limitVoxels(query_.grid) + 1;
@@ -121,7 +205,9 @@ bool SeedShipper::addSeeds(size_t tile, v1::QueryRequest* r) const {
       }
       return r->points().points_size() > 0;
     }
-    case ResolvedQuery::SeedKind::kMesh: r->set_asset_id(mesh_id_); return true;
+    case ResolvedQuery::SeedKind::kMesh:
+      r->set_asset_id(mesh_.id);
+      return true;
     case ResolvedQuery::SeedKind::kVolume: {
       if (const auto id = volume_ids_.find(boxKey(window)); id != volume_ids_.end()) {
         r->set_asset_id(id->second.second);
@@ -139,20 +225,10 @@ bool SeedShipper::addSeeds(size_t tile, v1::QueryRequest* r) const {
   return true;
 }
 
-Status SeedShipper::ship(TileDispatcher& calls) {
+Status SeedShipper::ship(ReplicaCalls& calls) {
   if (query_.seed_kind == ResolvedQuery::SeedKind::kMesh) {
-    if (mesh_bytes_.empty()) {
-      mesh_bytes_ = encodeBinaryPly(*query_.asset->mesh);
-      mesh_id_ = meshAssetId(mesh_bytes_, v1::MESH_FORMAT_PLY);
-    }
-    return uploadToReplicas(mesh_id_, calls, [&](v1::DistanceField::Stub& stub, grpc::ClientContext* context) {
-      v1::UploadReply reply;
-      v1::UploadMeshChunk first;
-      first.mutable_header()->set_format(v1::MESH_FORMAT_PLY);
-      first.mutable_header()->set_total_bytes(mesh_bytes_.size());
-      first.mutable_header()->set_name(query_.asset->name.substr(0, 200));
-      return streamUpload(stub.UploadMesh(context, &reply), mesh_bytes_, first, reply, mesh_id_);
-    });
+    if (mesh_.bytes.empty()) mesh_ = canonicalMesh(*query_.asset);
+    return uploads_.uploadMesh(mesh_, pool_.replicas(), calls);
   }
   if (query_.seed_kind == ResolvedQuery::SeedKind::kVolume) {
     const uint64_t inline_limit = options_.max_message_bytes / 2;
@@ -167,64 +243,16 @@ Status SeedShipper::ship(TileDispatcher& calls) {
       const std::string bytes = cropVolume(query_.asset->volume, entry.first);
       const v1::Dims dims = dimsOf(entry.first.dims);
       if (planning) entry.second = volumeAssetId(dims, query_.asset->volume.type(), bytes);
-      const std::string& id = entry.second;
-      Status s = uploadToReplicas(id, calls, [&](v1::DistanceField::Stub& stub, grpc::ClientContext* context) {
-        v1::UploadReply reply;
-        v1::UploadVolumeChunk first;
-        *first.mutable_header()->mutable_dims() = dims;
-        first.mutable_header()->set_element_type(v1VoxelType(query_.asset->volume.type()));
-        return streamUpload(stub.UploadVolume(context, &reply), bytes, first, reply, id);
-      });
-      if (!s.ok()) return s;
+      if (Status s =
+              uploads_.uploadVolume(dims, query_.asset->volume.type(), bytes, entry.second, pool_.replicas(), calls);
+          !s.ok())
+        return s;
     }
   }
   return Status::Ok();
 }
 
-void SeedShipper::forgetUploads() {
-  std::lock_guard lock(mu_);
-  uploaded_.clear();
-}
-
-Status SeedShipper::uploadToReplicas(const std::string& id, TileDispatcher& calls, const Upload& upload) {
-  const auto replicas = pool_.replicas();
-  int present = 0;
-  std::string last_error = "no replica resolves";
-  for (const ReplicaPool::Replica& r : replicas) {
-    if (Status stopped = calls.stopReason(); !stopped.ok()) return stopped;
-    {
-      std::lock_guard lock(mu_);
-      if (uploaded_.count({r.address, id})) {
-        ++present;
-        continue;
-      }
-    }
-    auto stub = v1::DistanceField::NewStub(r.channel);
-    grpc::ClientContext context;
-    Status s;
-    {
-      TileDispatcher::Call call(calls, &context);
-      s = upload(*stub, &context);
-    }
-    std::lock_guard lock(mu_);
-    if (s.ok()) {
-      uploaded_.insert({r.address, id});
-      ++present;
-    } else {
-      last_error = fmt::format("{}: {} {}", r.address, Status::codeName(s.code()), s.message());
-      LogLine("SeedUpload")
-          .text("request_id", calls.requestId())
-          .text("asset", id.substr(0, 17))
-          .text("replica", r.address)
-          .status(s)
-          .write(spdlog::level::warn);
-    }
-  }
-  // A replica that missed it answers NOT_FOUND to a tile, which uploads again and retries.
-  if (present > 0) return Status::Ok();
-  return Status::Unavailable(fmt::format("could not pass the seeds on to any replica of --peers {} ({})",
-                                         pool_.target(), last_error));
-}
+void SeedShipper::forgetUploads() { uploads_.forget(); }
 
 void SeedShipper::toQueryPointIds(size_t tile, v1::BrickBatch* batch) const {
   if (closestOf(query_.plan) != v1::CLOSEST_FEATURE_POINT) return;

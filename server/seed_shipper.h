@@ -13,6 +13,7 @@
 //   * ship() uploads to every replica not known to hold it; OK when at least one replica has it (a replica that
 //     missed it answers NOT_FOUND to a tile: forgetUploads(), then ship() again). Its calls go through the
 //     dispatcher (credentials, deadline, cancelled with the query's calls).
+//   * The uploads themselves are ReplicaUploads', which a point query (server/points_fan_out.h) uses alike.
 // Thread-safety: the first ship() runs alone, before any tile is sent (it settles the asset ids); after it, every
 // method may be called from any thread.
 #pragma once
@@ -22,18 +23,55 @@
 #include <mutex>
 #include <set>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
 #include "core/field/tiling.h"
 #include "core/status.h"
 #include "distband/v1/distband.grpc.pb.h"
+#include "server/asset_cache.h"
 #include "server/replica_pool.h"
 #include "server/request_validation.h"
 #include "server/server_options.h"
-#include "server/tile_dispatcher.h"
 
 namespace distband {
+
+/// A mesh as a coordinator hands it on: a canonical binary PLY (core/mesh/ply_writer.h: the same vertices bit for bit,
+/// the same triangles in the same order, whatever format the client uploaded) and the asset id a replica gives it.
+struct ShippedMesh {
+  std::string bytes;
+  std::string id;
+  std::string name;  ///< the upload's label, for the replicas' logs
+};
+ShippedMesh canonicalMesh(const Asset& mesh);
+
+/// The assets one coordinated query uploads to its replicas, and which replica it knows to hold which (for the query's
+/// life: a replica that already has the bytes answers already_cached). Each upload goes to every replica of
+/// `replicas` not known to hold the asset; OK when at least one of them holds it (the others' failures are logged).
+/// Calls go through `calls` (prepared, cancelled with the query's calls, none started once it stops). Thread-safe.
+class ReplicaUploads {
+ public:
+  explicit ReplicaUploads(const ReplicaPool& pool) : pool_(pool) {}
+
+  Status uploadMesh(const ShippedMesh& mesh, const std::vector<ReplicaPool::Replica>& replicas, ReplicaCalls& calls);
+  /// `bytes`: the volume's voxels, x fastest, each of `type`; `id` is volumeAssetId() of them.
+  Status uploadVolume(const v1::Dims& dims, VoxelType type, std::string_view bytes, const std::string& id,
+                      const std::vector<ReplicaPool::Replica>& replicas, ReplicaCalls& calls);
+  /// Whether `replica` (an address) is known to hold asset `id`.
+  bool holds(const std::string& replica, const std::string& id) const;
+  /// A replica lacked an upload: no replica is known to hold anything any more.
+  void forget();
+
+ private:
+  using Upload = std::function<Status(v1::DistanceField::Stub&, grpc::ClientContext*)>;
+  Status upload(const std::string& id, const std::vector<ReplicaPool::Replica>& replicas, ReplicaCalls& calls,
+                const Upload& upload);
+
+  const ReplicaPool& pool_;
+  mutable std::mutex mu_;
+  std::set<std::pair<std::string, std::string>> uploaded_;  ///< (replica, asset id) known to be there
+};
 
 class SeedShipper {
  public:
@@ -44,7 +82,7 @@ class SeedShipper {
   /// Puts the seeds into `tile`'s request; false when the tile has nothing to compute.
   bool addSeeds(size_t tile, v1::QueryRequest* request) const;
   /// Uploads the seeds that travel as assets to every replica not known to hold them.
-  Status ship(TileDispatcher& calls);
+  Status ship(ReplicaCalls& calls);
   /// A replica lacked an upload: no replica is known to hold anything any more.
   void forgetUploads();
   /// `tile`'s closest-point ids (BrickData.closest) as indices of the query's points; an id outside the tile's list
@@ -53,8 +91,6 @@ class SeedShipper {
   void toQueryPointIds(size_t tile, v1::BrickBatch* batch) const;
 
  private:
-  using Upload = std::function<Status(v1::DistanceField::Stub&, grpc::ClientContext*)>;
-  Status uploadToReplicas(const std::string& id, TileDispatcher& calls, const Upload& upload);
   /// Per tile: whether a triangle comes within the limit (always true without a limit or for other seeds).
   std::vector<bool> meshReach() const;
 
@@ -66,13 +102,11 @@ class SeedShipper {
   std::vector<std::vector<uint32_t>> point_index_;
   const std::vector<bool> mesh_reach_;
 
-  std::string mesh_id_, mesh_bytes_;
+  ShippedMesh mesh_;  ///< fixed by the first ship()
   /// Windows whose volume crop is too large to send inline -> (window, uploaded asset id); fixed by the first ship().
   std::map<std::string, std::pair<VoxelBox, std::string>> volume_ids_;
   bool volumes_planned_ = false;
-
-  std::mutex mu_;
-  std::set<std::pair<std::string, std::string>> uploaded_;  ///< (replica, asset id) known to be there
+  ReplicaUploads uploads_;
 };
 
 }  // namespace distband

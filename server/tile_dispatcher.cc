@@ -35,17 +35,16 @@ bool retriable(Status::Code code) {
 
 TileDispatcher::TileDispatcher(Config config, Tiles& tiles) : config_(config), tiles_(tiles) {}
 
-TileDispatcher::Call::Call(TileDispatcher& dispatcher, grpc::ClientContext* context)
-    : dispatcher_(dispatcher), context_(context) {
-  dispatcher_.config_.pool.prepare(context_, dispatcher_.tileDeadline());
-  if (!dispatcher_.config_.request_id.empty()) context_->AddMetadata(kRequestIdHeader, dispatcher_.config_.request_id);
-  std::lock_guard lock(dispatcher_.mu_);
-  dispatcher_.calls_.insert(context_);
+void TileDispatcher::enroll(grpc::ClientContext* context) {
+  config_.pool.prepare(context, tileDeadline());
+  if (!config_.request_id.empty()) context->AddMetadata(kRequestIdHeader, config_.request_id);
+  std::lock_guard lock(mu_);
+  calls_.insert(context);
 }
 
-TileDispatcher::Call::~Call() {
-  std::lock_guard lock(dispatcher_.mu_);
-  dispatcher_.calls_.erase(context_);
+void TileDispatcher::withdraw(grpc::ClientContext* context) {
+  std::lock_guard lock(mu_);
+  calls_.erase(context);
 }
 
 void TileDispatcher::stop() {

@@ -16,8 +16,8 @@
 //     re-ships the seeds first) is retried up to --tile-retries times; beyond them, or on another code, the query
 //     fails with UNAVAILABLE (INTERNAL for a code not worth retrying) naming the tile and the last error. A failed
 //     attempt loses nothing when everything its tile had to deliver was already merged: the tile is then done.
-//   * Call is how any other call of the query (the seeds' uploads) is prepared (credentials, deadline, the query's
-//     x-request-id) and made cancellable with the tile calls.
+//   * As the query's ReplicaCalls (server/replica_pool.h) it prepares any other call of the query (the seeds'
+//     uploads) like a tile call (credentials, the tile deadline, the query's x-request-id) and cancels it with them.
 //   * Every tile call is reported to Metrics by the replica it reached (dispatched; failed, and whether it is
 //     retried); a retry's log line carries the query's request id.
 // Thread-safe. The Tiles methods marked "locked" are called under the dispatcher's lock, one at a time, and only
@@ -45,7 +45,7 @@
 
 namespace distband {
 
-class TileDispatcher {
+class TileDispatcher final : public ReplicaCalls {
  public:
   struct Config {
     const ServerOptions& options;
@@ -78,20 +78,6 @@ class TileDispatcher {
     virtual Status reship() = 0;
   };
 
-  /// Keeps a call prepared (credentials, the tile deadline, the request id) and cancelled with the query's calls for
-  /// its scope.
-  class Call {
-   public:
-    Call(TileDispatcher& dispatcher, grpc::ClientContext* context);
-    ~Call();
-    Call(const Call&) = delete;
-    Call& operator=(const Call&) = delete;
-
-   private:
-    TileDispatcher& dispatcher_;
-    grpc::ClientContext* context_;
-  };
-
   TileDispatcher(Config config, Tiles& tiles);
 
   /// Dispatches `plans` (one per tile) over `replicas` replicas until the contract's end; see status().
@@ -101,9 +87,9 @@ class TileDispatcher {
   /// Any thread: cancels every call and makes run() return.
   void stop();
   /// Why calls must not start now (the Interrupter's status, or CANCELLED after stop()); OK while they may.
-  Status stopReason() const;
+  Status stopReason() const override;
 
-  const std::string& requestId() const { return config_.request_id; }
+  const std::string& requestId() const override { return config_.request_id; }
 
   /// After run(): OK, or the query's first error.
   const Status& status() const { return status_; }
@@ -121,6 +107,9 @@ class TileDispatcher {
     std::string peer;  ///< the replica it ran on (as gRPC names it, e.g. "ipv4:10.0.0.1:50051")
   };
 
+  /// ReplicaCalls: a call prepared like a tile's (the tile deadline) and registered in calls_.
+  void enroll(grpc::ClientContext* context) override;
+  void withdraw(grpc::ClientContext* context) override;
   void worker(const std::vector<TilePlan>& plans);
   Attempt runTile(size_t index);
   /// Under mu_.
