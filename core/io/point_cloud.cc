@@ -256,9 +256,11 @@ class PlyPoints final : public PointCloudReader {
       need += e->count * record;
     }
     if (vertex_.count > limits.max_points) return tooMany(name_, vertex_.count, limits.max_points);
-    for (auto e = elements.begin(); e != vertex; ++e)
+    for (auto e = elements.begin(); e != vertex; ++e) {
+      if (e->properties.empty()) continue;  // records of no bytes: any count (the bytes bound none) skips at once
       for (uint64_t r = 0; r < e->count; ++r)
         if (Status s = readRecord(*e, r, nullptr); !s.ok()) return s;
+    }
     return Status::Ok();
   }
 

@@ -168,6 +168,21 @@ TEST(PointCloudTest, MalformedInputsAreRefusedNamingWhere) {
   refuses("plx\n", F::kPly, C::kInvalidArgument, "does not start with 'ply'");
 }
 
+TEST(PointCloudTest, AnElementWithoutPropertiesIsSkippedWhateverItsCount) {
+  // Its records hold no bytes, so no size check bounds its count: skipping 2^62 of them one by one never ended (fuzz).
+  for (const char* format : {"ascii", "binary_little_endian"}) {
+    std::string ply = fmt::format(
+        "ply\nformat {} 1.0\nelement nothing 4611686018427387904\nelement vertex 1\n"
+        "property double x\nproperty double y\nproperty double z\nend_header\n",
+        format);
+    const double xyz[3] = {1.5, -2, 3};
+    ply += std::string_view(format) == "ascii" ? "1.5 -2 3\n" : std::string(reinterpret_cast<const char*>(xyz), 24);
+    std::vector<Vec3d> out;
+    ASSERT_TRUE(IsOk(readPointCloud(ply, PointFileFormat::kPly, {}, "cloud", nullptr, &out))) << format;
+    EXPECT_EQ(out, std::vector<Vec3d>({{1.5, -2, 3}})) << format;
+  }
+}
+
 TEST(PointCloudTest, CountsBeyondTheLimitAreRefusedBeforeReading) {
   const std::vector<Vec3d> points = somePoints(50);
   PointReadLimits limits;
