@@ -21,6 +21,7 @@
 #include "core/io/npy.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/points/point_results.h"
+#include "tests/integration/points_streams.h"
 #include "tests/integration/service_fixture.h"
 #include "tests/support/brute_mesh.h"
 
@@ -28,6 +29,7 @@ namespace distband {
 namespace {
 
 namespace fs = std::filesystem;
+using namespace points_streams;
 using testing::bruteDistance;
 using testing::bruteWinding;
 
@@ -36,39 +38,6 @@ const std::string kBunny = std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/bunny.
 std::string readFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), {}};
-}
-
-void bounds(const TriangleMesh& mesh, Vec3d* lo, Vec3d* hi) {
-  *lo = *hi = mesh.vertices[0];
-  for (const Vec3d& v : mesh.vertices) {
-    *lo = {std::min(lo->x, v.x), std::min(lo->y, v.y), std::min(lo->z, v.z)};
-    *hi = {std::max(hi->x, v.x), std::max(hi->y, v.y), std::max(hi->z, v.z)};
-  }
-}
-
-/// Query points: half uniform in the bounding box grown by 20 %, half Gaussian around surface points (sigma 1 % of
-/// the diagonal).
-std::vector<Vec3d> samplePoints(const TriangleMesh& mesh, size_t n, uint32_t seed) {
-  Vec3d lo, hi;
-  bounds(mesh, &lo, &hi);
-  const Vec3d size = hi - lo;
-  const double diagonal = size.length();
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(0, 1);
-  std::normal_distribution<double> g(0, 0.01 * diagonal);
-  std::vector<Vec3d> p(n);
-  for (size_t i = 0; i < n; ++i) {
-    if (i % 2 == 0) {
-      p[i] = {lo.x - 0.1 * size.x + 1.2 * size.x * u(rng), lo.y - 0.1 * size.y + 1.2 * size.y * u(rng),
-              lo.z - 0.1 * size.z + 1.2 * size.z * u(rng)};
-    } else {
-      const auto& t = mesh.triangles[size_t(u(rng) * double(mesh.triangles.size())) % mesh.triangles.size()];
-      const double a = u(rng), b = u(rng) * (1 - a);
-      const Vec3d s = mesh.vertices[t[0]] * (1 - a - b) + mesh.vertices[t[1]] * a + mesh.vertices[t[2]] * b;
-      p[i] = s + Vec3d{g(rng), g(rng), g(rng)};
-    }
-  }
-  return p;
 }
 
 std::string npyPoints(const std::vector<Vec3d>& p) {
@@ -83,12 +52,6 @@ std::vector<T> readNpyAs(const std::string& path, const char* descr) {
   std::vector<T> v(a.data.size() / sizeof(T));
   std::memcpy(v.data(), a.data.data(), v.size() * sizeof(T));
   return v;
-}
-
-std::string packXyz(const std::vector<Vec3d>& p, bool doubles) {
-  std::string out;
-  PointResultBuffer::packValues(reinterpret_cast<const double*>(p.data()), 3 * p.size(), {doubles, false}, &out);
-  return out;
 }
 
 struct CliFixture {
@@ -233,26 +196,6 @@ TEST(PointsTest, SeedPointsAndALimitThroughTheClientLibrary) {
   EXPECT_GT(beyond, 100u);
 }
 
-/// A raw stream: the messages given, then half-close; the status and the replies' count.
-struct RawResult {
-  grpc::Status status;
-  int results = 0;
-};
-RawResult rawStream(RemoteClient& client, const std::vector<v1::PointsRequest>& messages) {
-  auto stub = v1::DistanceField::NewStub(client.channel());
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-  auto stream = stub->QueryPoints(&ctx);
-  for (const v1::PointsRequest& m : messages)
-    if (!stream->Write(m)) break;
-  stream->WritesDone();
-  RawResult r;
-  v1::PointsReply reply;
-  while (stream->Read(&reply)) r.results += reply.has_results();
-  r.status = stream->Finish();
-  return r;
-}
-
 v1::PointsRequest meshHeader(v1::ValueType type = v1::VALUE_TYPE_FLOAT32) {
   v1::PointsRequest m;
   m.mutable_header()->mutable_mesh()->set_format(v1::MESH_FORMAT_OBJ);
@@ -261,18 +204,6 @@ v1::PointsRequest meshHeader(v1::ValueType type = v1::VALUE_TYPE_FLOAT32) {
       "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n");
   m.mutable_header()->set_coordinates(type);
   return m;
-}
-
-v1::PointsRequest chunkOf(std::vector<Vec3d> p, bool doubles = false) {
-  v1::PointsRequest m;
-  m.mutable_chunk()->set_xyz(packXyz(p, doubles));
-  return m;
-}
-
-void expectRefused(const RawResult& r, grpc::StatusCode code, const std::vector<std::string>& words) {
-  EXPECT_EQ(r.status.error_code(), code) << r.status.error_message();
-  for (const std::string& w : words)
-    EXPECT_NE(r.status.error_message().find(w), std::string::npos) << r.status.error_message() << " lacks " << w;
 }
 
 TEST(PointsTest, HostileStreamsGetTheirStatusNamingTheChunkAndPoint) {
@@ -284,59 +215,59 @@ TEST(PointsTest, HostileStreamsGetTheirStatusNamingTheChunkAndPoint) {
   // Malformed chunks: odd byte counts, NaN, inf, no points, too many points; after valid chunks were answered.
   v1::PointsRequest odd = good;
   odd.mutable_chunk()->mutable_xyz()->push_back('x');
-  RawResult r = rawStream(c, {meshHeader(), good, odd});
+  RawResult r = rawStream(c.channel(), {meshHeader(), good, odd});
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"chunk 1", "25 bytes"});
   EXPECT_EQ(r.results, 1);  // the chunk before stays answered
-  r = rawStream(c, {meshHeader(), good, good, chunkOf({{0, 0, 0}, {1, 1, 1}, {0, nan, 0}})});
+  r = rawStream(c.channel(), {meshHeader(), good, good, chunkOf({{0, 0, 0}, {1, 1, 1}, {0, nan, 0}})});
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"chunk 2", "point 2", "point 6 of the stream"});
-  r = rawStream(c, {meshHeader(v1::VALUE_TYPE_FLOAT64), chunkOf({{inf, 0, 0}}, true)});
+  r = rawStream(c.channel(), {meshHeader(v1::VALUE_TYPE_FLOAT64), chunkOf({{inf, 0, 0}}, true)});
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"chunk 0", "point 0", "not finite"});
-  r = rawStream(c, {meshHeader(), chunkOf({})});
+  r = rawStream(c.channel(), {meshHeader(), chunkOf({})});
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"chunk 0", "no point"});
-  r = rawStream(c, {meshHeader(), chunkOf(std::vector<Vec3d>(kMaxChunkPoints + 1))});
+  r = rawStream(c.channel(), {meshHeader(), chunkOf(std::vector<Vec3d>(kMaxChunkPoints + 1))});
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"chunk 0", "max_chunk_points"});
-  r = rawStream(c, {meshHeader(), good, meshHeader()});
+  r = rawStream(c.channel(), {meshHeader(), good, meshHeader()});
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"chunk 1", "header"});
 
   // Malformed headers, refused before any work.
-  r = rawStream(c, {good});
+  r = rawStream(c.channel(), {good});
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"header"});
   v1::PointsRequest h = meshHeader();
   h.mutable_header()->set_limit(-1);
-  expectRefused(rawStream(c, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"limit"});
+  expectRefused(rawStream(c.channel(), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"limit"});
   h = meshHeader();
   h.mutable_header()->set_limit(nan);
-  expectRefused(rawStream(c, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"limit"});
+  expectRefused(rawStream(c.channel(), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"limit"});
   h = meshHeader();
   h.mutable_header()->set_sign(v1::SignMode(99));
-  expectRefused(rawStream(c, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"sign"});
+  expectRefused(rawStream(c.channel(), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"sign"});
   h = meshHeader();
   h.mutable_header()->set_sign(v1::SIGN_MODE_MASK_INSIDE);
-  expectRefused(rawStream(c, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"sign", "MASK_INSIDE"});
+  expectRefused(rawStream(c.channel(), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"sign", "MASK_INSIDE"});
   h = meshHeader();
   h.mutable_header()->set_coordinates(v1::ValueType(7));
-  expectRefused(rawStream(c, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"coordinates"});
+  expectRefused(rawStream(c.channel(), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"coordinates"});
   h = meshHeader();
   h.mutable_header()->set_volume_voxel_size(2);
-  expectRefused(rawStream(c, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"volume_voxel_size"});
+  expectRefused(rawStream(c.channel(), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"volume_voxel_size"});
   h = meshHeader();
   h.mutable_header()->mutable_mesh()->set_format(v1::MeshFormat(42));
-  expectRefused(rawStream(c, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"mesh.format"});
+  expectRefused(rawStream(c.channel(), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"mesh.format"});
   h = meshHeader();
   h.mutable_header()->mutable_mesh()->set_data("v 0 0 0\nf 1 2 3\n");
-  expectRefused(rawStream(c, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"mesh"});
+  expectRefused(rawStream(c.channel(), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"mesh"});
   v1::PointsRequest none;
   none.mutable_header();
-  expectRefused(rawStream(c, {none, good}), grpc::StatusCode::INVALID_ARGUMENT, {"seeds"});
+  expectRefused(rawStream(c.channel(), {none, good}), grpc::StatusCode::INVALID_ARGUMENT, {"seeds"});
   v1::PointsRequest unknown;
   unknown.mutable_header()->set_asset_id("mesh-0123");
-  expectRefused(rawStream(c, {unknown, good}), grpc::StatusCode::NOT_FOUND, {});
+  expectRefused(rawStream(c.channel(), {unknown, good}), grpc::StatusCode::NOT_FOUND, {});
   v1::PointsRequest bad_points;
   bad_points.mutable_header()->mutable_points()->add_points()->set_x(nan);
-  expectRefused(rawStream(c, {bad_points, good}), grpc::StatusCode::INVALID_ARGUMENT, {"points"});
+  expectRefused(rawStream(c.channel(), {bad_points, good}), grpc::StatusCode::INVALID_ARGUMENT, {"points"});
 
   // Nothing else broke: a good stream still works, with both points right.
-  r = rawStream(c, {meshHeader(), good});
+  r = rawStream(c.channel(), {meshHeader(), good});
   EXPECT_TRUE(r.status.ok()) << r.status.error_message();
   EXPECT_EQ(r.results, 1);
 }

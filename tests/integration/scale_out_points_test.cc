@@ -31,6 +31,7 @@
 #include "core/mesh/triangle_mesh.h"
 #include "core/points/point_results.h"
 #include "server/request_id.h"
+#include "tests/integration/points_streams.h"
 #include "tests/integration/service_fixture.h"
 #include "tests/support/brute_mesh.h"
 #include "tests/support/build_flavor.h"
@@ -40,6 +41,7 @@ namespace distband {
 namespace {
 
 namespace fs = std::filesystem;
+using namespace points_streams;
 
 const std::string kBunny = std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/bunny.obj";
 
@@ -68,12 +70,6 @@ struct PointsCluster {
   }
 };
 
-std::string packXyz(const std::vector<Vec3d>& p, bool doubles) {
-  std::string out;
-  PointResultBuffer::packValues(reinterpret_cast<const double*>(p.data()), 3 * p.size(), {doubles, false}, &out);
-  return out;
-}
-
 /// `points` packed in chunks of `chunk_points`.
 std::vector<std::string> chunked(const std::vector<Vec3d>& points, size_t chunk_points, bool doubles) {
   std::vector<std::string> chunks;
@@ -93,8 +89,12 @@ struct PointsRun {
   std::string distance, closest_points, closest_feature, gradient;
 };
 
+std::shared_ptr<grpc::Channel> channelTo(const std::string& target) {
+  return grpc::CreateChannel(target, grpc::InsecureChannelCredentials());
+}
+
 std::unique_ptr<v1::DistanceField::Stub> stubFor(const std::string& target) {
-  return v1::DistanceField::NewStub(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
+  return v1::DistanceField::NewStub(channelTo(target));
 }
 
 /// A stream as a pipelining client makes it: a writer thread sends the header and every chunk, then half-closes,
@@ -204,21 +204,6 @@ std::vector<Vec3d> uniformPoints(size_t n, const Vec3d& lo, const Vec3d& hi, uin
   return p;
 }
 
-/// Half uniform in the mesh's bounds grown by 20 %, half near its vertices.
-std::vector<Vec3d> meshQueryPoints(const TriangleMesh& mesh, size_t n, uint32_t seed) {
-  Vec3d lo = mesh.vertices[0], hi = lo;
-  for (const Vec3d& v : mesh.vertices) {
-    lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
-    hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
-  }
-  const Vec3d margin = (hi - lo) * 0.2;
-  std::vector<Vec3d> p = uniformPoints(n, lo - margin, hi + margin, seed);
-  std::mt19937 rng(seed + 1);
-  std::normal_distribution<double> g(0, 0.01 * (hi - lo).length());
-  for (size_t i = 1; i < n; i += 2) p[i] = mesh.vertices[rng() % mesh.vertices.size()] + Vec3d{g(rng), g(rng), g(rng)};
-  return p;
-}
-
 v1::PointsHeader allOutputs(v1::PointsHeader h, v1::ValueType type) {
   h.set_coordinates(type);
   h.set_closest_points(true);
@@ -250,7 +235,7 @@ TEST(ScaleOutPointsTest, ChunksFanOutToEveryReplicaAndComeBackBitIdenticalInOrde
     v1::UploadReply up_direct, up_coordinator;
     ASSERT_TRUE(direct.client().uploadMeshFile(kBunny, &up_direct).ok());
     ASSERT_TRUE(cluster.coordinator->client().uploadMeshFile(kBunny, &up_coordinator).ok());
-    const std::vector<Vec3d> at = meshQueryPoints(mesh, 3000, 5);
+    const std::vector<Vec3d> at = samplePoints(mesh, 3000, 5);
     const std::vector<std::string> chunks = chunked(at, 97, true);  // 31 chunks
     v1::PointsHeader h;
     h.set_asset_id(up_direct.asset_id());
@@ -309,44 +294,10 @@ TEST(ScaleOutPointsTest, ChunksFanOutToEveryReplicaAndComeBackBitIdenticalInOrde
   }
 }
 
-/// A raw stream: the messages given, then half-close; the status and the number of results.
-struct RawResult {
-  grpc::Status status;
-  int results = 0;
-};
-RawResult rawStream(const std::string& target, const std::vector<v1::PointsRequest>& messages,
-                    const std::string& request_id = {}) {
-  auto stub = stubFor(target);
-  grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-  if (!request_id.empty()) context.AddMetadata(kRequestIdHeader, request_id);
-  auto stream = stub->QueryPoints(&context);
-  for (const v1::PointsRequest& m : messages)
-    if (!stream->Write(m)) break;
-  stream->WritesDone();
-  RawResult r;
-  v1::PointsReply reply;
-  while (stream->Read(&reply)) r.results += reply.has_results();
-  r.status = stream->Finish();
-  return r;
-}
-
 v1::PointsRequest headerMessage(const v1::PointsHeader& h) {
   v1::PointsRequest m;
   *m.mutable_header() = h;
   return m;
-}
-
-v1::PointsRequest chunkMessage(const std::vector<Vec3d>& p) {
-  v1::PointsRequest m;
-  m.mutable_chunk()->set_xyz(packXyz(p, false));
-  return m;
-}
-
-void expectRefused(const RawResult& r, grpc::StatusCode code, const std::vector<std::string>& words) {
-  EXPECT_EQ(r.status.error_code(), code) << r.status.error_message();
-  for (const std::string& w : words)
-    EXPECT_NE(r.status.error_message().find(w), std::string::npos) << r.status.error_message() << " lacks " << w;
 }
 
 TEST(ScaleOutPointsTest, TheCoordinatorRefusesMalformedChunksAndHeadersItselfAndKeepsServing) {
@@ -354,19 +305,19 @@ TEST(ScaleOutPointsTest, TheCoordinatorRefusesMalformedChunksAndHeadersItselfAnd
   ASSERT_TRUE(cluster.ready());
   const std::string target = cluster.coordinator->target();
   const v1::PointsRequest header = headerMessage(pointSeedsHeader({{0, 0, 0}, {4, 0, 0}}));
-  const v1::PointsRequest good = chunkMessage({{0, 0, 0}, {2, 0, 0}});
+  const v1::PointsRequest good = chunkOf({{0, 0, 0}, {2, 0, 0}});
 
   // Malformed chunks: named in the client's numbering, after the chunks before them were answered.
   v1::PointsRequest odd = good;
   odd.mutable_chunk()->mutable_xyz()->push_back('x');
-  RawResult r = rawStream(target, {header, good, good, odd}, "fanout-odd");
+  RawResult r = rawStream(channelTo(target), {header, good, good, odd}, "fanout-odd");
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"chunk 2", "25 bytes"});
   EXPECT_EQ(r.results, 2);
   const double nan = std::nan("");
-  r = rawStream(target, {header, good, good, good, chunkMessage({{0, 0, 0}, {1, 1, 1}, {0, nan, 0}})});
+  r = rawStream(channelTo(target), {header, good, good, good, chunkOf({{0, 0, 0}, {1, 1, 1}, {0, nan, 0}})});
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"chunk 3", "point 2", "point 8 of the stream", "not finite"});
   EXPECT_EQ(r.results, 3);
-  r = rawStream(target, {header, good, header});
+  r = rawStream(channelTo(target), {header, good, header});
   expectRefused(r, grpc::StatusCode::INVALID_ARGUMENT, {"chunk 1", "header"});
   // The replicas' streams of those calls were cancelled, not failed (the coordinator refused the chunk).
   for (const int n : chunksPerReplica(cluster, "fanout-odd", "CANCELLED")) EXPECT_GE(n, 0);
@@ -374,17 +325,17 @@ TEST(ScaleOutPointsTest, TheCoordinatorRefusesMalformedChunksAndHeadersItselfAnd
   // Headers are checked as a replica checks them, before any traffic to the replicas.
   v1::PointsRequest h = header;
   h.mutable_header()->set_limit(-1);
-  expectRefused(rawStream(target, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"header", "limit"});
+  expectRefused(rawStream(channelTo(target), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"header", "limit"});
   h = header;
   h.mutable_header()->set_sign(v1::SIGN_MODE_MASK_INSIDE);
-  expectRefused(rawStream(target, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"sign", "MASK_INSIDE"});
+  expectRefused(rawStream(channelTo(target), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"sign", "MASK_INSIDE"});
   h = header;
   h.mutable_header()->set_coordinates(v1::ValueType(7));
-  expectRefused(rawStream(target, {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"coordinates"});
+  expectRefused(rawStream(channelTo(target), {h, good}), grpc::StatusCode::INVALID_ARGUMENT, {"coordinates"});
   v1::PointsRequest unknown;
   unknown.mutable_header()->set_asset_id("mesh-0123");
-  expectRefused(rawStream(target, {unknown, good}), grpc::StatusCode::NOT_FOUND, {"asset_id"});
-  expectRefused(rawStream(target, {good}), grpc::StatusCode::INVALID_ARGUMENT, {"header"});
+  expectRefused(rawStream(channelTo(target), {unknown, good}), grpc::StatusCode::NOT_FOUND, {"asset_id"});
+  expectRefused(rawStream(channelTo(target), {good}), grpc::StatusCode::INVALID_ARGUMENT, {"header"});
   for (auto& replica : cluster.replicas) {
     auto lines = [&] {
       const std::string log = replica->log();
@@ -398,7 +349,7 @@ TEST(ScaleOutPointsTest, TheCoordinatorRefusesMalformedChunksAndHeadersItselfAnd
   }
 
   // Nothing broke: a good stream is answered.
-  r = rawStream(target, {header, good, good, good, good});
+  r = rawStream(channelTo(target), {header, good, good, good, good});
   EXPECT_TRUE(r.status.ok()) << r.status.error_message();
   EXPECT_EQ(r.results, 4);
 }
@@ -500,7 +451,7 @@ TEST(ScaleOutPointsTest, ACancelledCallEndsPromptlyAndEndsEveryReplicaStream) {
   h.set_asset_id(up.asset_id());
   h.set_gradient(true);
   // Full chunks (tens of ms of compute each on a replica's one thread), so the cancel finds them computing.
-  const std::string xyz = packXyz(meshQueryPoints(mesh, kMaxChunkPoints, 11), false);
+  const std::string xyz = packXyz(samplePoints(mesh, kMaxChunkPoints, 11), false);
   std::atomic<int64_t> cancelled_ns{0};
   std::atomic<double> stop_ms{-1};
   std::thread watcher([&] {  // the coordinator's call ends after the cancel
@@ -546,7 +497,7 @@ TEST(ScaleOutPointsTest, TheCliAtCommandWorksThroughTheCoordinator) {
   TriangleMesh mesh;
   MeshReport report;
   ASSERT_TRUE(loadMesh(kBunny, &mesh, &report).ok());
-  const std::vector<Vec3d> at = meshQueryPoints(mesh, 1500, 13);
+  const std::vector<Vec3d> at = samplePoints(mesh, 1500, 13);
   std::ofstream((dir / "q.npy").string(), std::ios::binary)
       << encodeNpy("<f8", {int64_t(at.size()), 3}, at.data(), at.size() * sizeof(Vec3d));
   auto run = [&](const std::string& server, const std::string& out) {
