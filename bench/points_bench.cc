@@ -11,10 +11,12 @@
 // sigma = 1 % of the box diagonal; rounded to float32 (Open3D's type), the same values for both.
 // Per case: the median seconds of each side's query over --repeats runs (the search / scene build timed apart), the
 // throughput ratio (Open3D's seconds / ours), and on the first --check points the max distance error / diagonal and
-// the sign errors (where |w - 1/2| > 0.05) of both. Exit 1 when ours is off (error > 1e-6 diagonal, a sign error);
+// the sign errors (where |w - 1/2| > 0.05) of both, and whether our closest points and triangle ids agree with the
+// exact distance. Exit 1 when ours is off (error > 1e-6 diagonal, a sign error, a closest point or id inconsistent);
 // Open3D's errors are reported, not judged. Without open3d the peer columns are empty (exit 77 with --smoke: CTest
 // skips).
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -130,13 +132,15 @@ struct Side {
   double build_seconds = 0, unsigned_seconds = 0, signed_seconds = 0;
   double max_error = 0;  ///< / diagonal, signed distances against the exact ones
   int64_t sign_errors = 0, sign_checked = 0;
+  int64_t closest_errors = 0;  ///< ours: checked points whose closest point or triangle id disagree with the distance
   bool present = false;
   std::string version;
 };
 
 /// Our side: the search built as `distband at` builds it, queried on all points.
 Status runOurs(const TriangleMesh& mesh, const MeshReport& report, const std::vector<Vec3d>& at, int repeats,
-               std::vector<double>* signed_distance, Side* side) {
+               size_t check, std::vector<double>* signed_distance, std::vector<Vec3d>* closest,
+               std::vector<int64_t>* feature, Side* side) {
   FieldRequest signed_request, unsigned_request;
   signed_request.seeds = unsigned_request.seeds = SeedKind::kMesh;
   unsigned_request.mesh_sign = SignMethod::kUnsigned;
@@ -171,7 +175,36 @@ Status runOurs(const TriangleMesh& mesh, const MeshReport& report, const std::ve
   side->signed_seconds = median(ts);
   side->present = true;
   *signed_distance = std::move(d);
-  return Status::Ok();
+  // The closest points and triangles of the first `check` points (untimed), for judgeClosest.
+  std::vector<double> dc(check);
+  closest->resize(check);
+  feature->resize(check);
+  return queryPoints(signed_search, at.data(), check, signed_plan.queryOptions(nullptr),
+                     {dc.data(), closest->data(), feature->data()});
+}
+
+/// Whether each closest point and triangle id agree with the exact distance: the triangle's own distance (brute
+/// force over that one triangle) and the closest point's distance are the exact distance, and the closest point lies
+/// on that triangle. Counts the points where they do not.
+void judgeClosest(const TriangleMesh& mesh, const std::vector<Vec3d>& at, const std::vector<double>& exact,
+                  const std::vector<Vec3d>& closest, const std::vector<int64_t>& feature, double diagonal, Side* side) {
+  const double tolerance = 1e-9 * diagonal;
+  std::atomic<int64_t> errors{0};
+  tbb::parallel_for(size_t(0), exact.size(), [&](size_t i) {
+    const int64_t id = feature[i];
+    if (id < 0 || uint64_t(id) >= mesh.triangles.size()) {
+      ++errors;
+      return;
+    }
+    TriangleMesh one;
+    for (int k = 0; k < 3; ++k) one.vertices.push_back(mesh.vertices[mesh.triangles[size_t(id)][size_t(k)]]);
+    one.triangles.push_back({0, 1, 2});
+    const bool ok = std::abs(testing::bruteDistance(one, at[i]) - exact[i]) <= tolerance &&
+                    std::abs((at[i] - closest[i]).length() - exact[i]) <= tolerance &&
+                    testing::bruteDistance(one, closest[i]) <= tolerance;
+    errors += !ok;
+  });
+  side->closest_errors = errors;
 }
 
 template <typename T>
@@ -259,15 +292,17 @@ int run(const Options& o) {
       const char* dist = gaussian ? "gaussian" : "uniform";
       const std::vector<Vec3d> at = samplePoints(mesh, o.points, gaussian, 1234);
       std::vector<double> ours_d;
+      std::vector<Vec3d> ours_closest;
+      std::vector<int64_t> ours_feature;
       Side ours, peer;
-      if (Status s = runOurs(mesh, report, at, o.repeats, &ours_d, &ours); !s.ok()) {
+      const size_t k = std::min<size_t>(size_t(o.check), at.size());
+      if (Status s = runOurs(mesh, report, at, o.repeats, k, &ours_d, &ours_closest, &ours_feature, &ours); !s.ok()) {
         std::fprintf(stderr, "FAIL %s %s: %s\n", name.c_str(), dist, s.toString().c_str());
         return 1;
       }
       std::vector<float> peer_d;
       runPeer(mesh, at, o, dir, &peer_d, &peer);
       peer_missing |= !peer.present;
-      const size_t k = std::min<size_t>(size_t(o.check), at.size());
       std::vector<double> exact(k), winding(k);
       tbb::parallel_for(size_t(0), k, [&](size_t i) {
         exact[i] = testing::bruteDistance(mesh, at[i]);
@@ -275,11 +310,18 @@ int run(const Options& o) {
       });
       judge(exact, winding, ours_d, diagonal, &ours);
       if (peer.present) judge(exact, winding, peer_d, diagonal, &peer);
-      const bool ok = ours.max_error <= 1e-6 && ours.sign_errors == 0;
+      judgeClosest(mesh, at, exact, ours_closest, ours_feature, diagonal, &ours);
+      const bool ok = ours.max_error <= 1e-6 && ours.sign_errors == 0 && ours.closest_errors == 0;
+      std::printf(
+          "%s %s: %zu points checked against brute force: max error %.3g diagonal, %lld sign errors of %lld "
+          "decided, %lld closest points or triangle ids inconsistent with the distance\n",
+          name.c_str(), dist, k, ours.max_error, (long long)ours.sign_errors, (long long)ours.sign_checked,
+          (long long)ours.closest_errors);
       if (!ok) {
         failed = true;
-        std::fprintf(stderr, "FAIL %s %s: max error %.3g diagonal, %lld sign errors of %lld\n", name.c_str(), dist,
-                     ours.max_error, (long long)ours.sign_errors, (long long)ours.sign_checked);
+        std::fprintf(stderr, "FAIL %s %s: max error %.3g diagonal, %lld sign errors of %lld, %lld closest errors\n",
+                     name.c_str(), dist, ours.max_error, (long long)ours.sign_errors, (long long)ours.sign_checked,
+                     (long long)ours.closest_errors);
       }
       const double n = double(at.size());
       const double ratio_s = peer.present ? peer.signed_seconds / ours.signed_seconds : NAN;
@@ -295,12 +337,13 @@ int run(const Options& o) {
       json.push_back(fmt::format(
           "{{\"mesh\": \"{}\", \"triangles\": {}, \"points\": \"{}\", \"n\": {}, \"threads\": {}, \"repeats\": {}, "
           "\"ours\": {{\"build_s\": {}, \"signed_s\": {}, \"unsigned_s\": {}, \"max_err_diag\": {}, "
-          "\"sign_errors\": {}, \"sign_checked\": {}}}, \"open3d\": {{\"present\": {}, \"version\": \"{}\", "
+          "\"sign_errors\": {}, \"sign_checked\": {}, \"closest_errors\": {}}}, \"open3d\": {{\"present\": {}, "
+          "\"version\": \"{}\", "
           "\"build_s\": {}, \"signed_s\": {}, \"unsigned_s\": {}, \"max_err_diag\": {}, \"sign_errors\": {}}}, "
           "\"ratio_signed\": {}, \"ratio_unsigned\": {}, \"ok\": {}}}",
           name, mesh.triangles.size(), dist, at.size(), o.threads, o.repeats, ours.build_seconds, ours.signed_seconds,
-          ours.unsigned_seconds, ours.max_error, ours.sign_errors, ours.sign_checked, peer.present, peer.version,
-          peer.present ? peer.build_seconds : 0, peer.present ? peer.signed_seconds : 0,
+          ours.unsigned_seconds, ours.max_error, ours.sign_errors, ours.sign_checked, ours.closest_errors, peer.present,
+          peer.version, peer.present ? peer.build_seconds : 0, peer.present ? peer.signed_seconds : 0,
           peer.present ? peer.unsigned_seconds : 0, peer.max_error, peer.sign_errors,
           std::isfinite(ratio_s) ? ratio_s : 0, std::isfinite(ratio_u) ? ratio_u : 0, ok));
       std::printf("%s\n", json.back().c_str());
