@@ -44,15 +44,22 @@ bool AssetCache::insert(std::shared_ptr<const Asset> asset) {
     lru_.splice(lru_.begin(), lru_, it->second);
     return true;
   }
-  while (used_ + bytes > capacity_ && !lru_.empty()) {
-    used_ -= lru_.back().bytes;
-    index_.erase(lru_.back().asset->id);
-    lru_.pop_back();
-  }
+  makeRoom(bytes, lru_.end());
   lru_.push_front({std::move(asset), bytes});
   index_[lru_.front().asset->id] = lru_.begin();
   used_ += bytes;
   return true;
+}
+
+void AssetCache::makeRoom(uint64_t bytes, std::list<Entry>::iterator keep) {
+  auto victim = lru_.end();
+  while (used_ + bytes > capacity_ && victim != lru_.begin()) {
+    --victim;
+    if (victim == keep) continue;
+    used_ -= victim->bytes;
+    index_.erase(victim->asset->id);
+    victim = lru_.erase(victim);
+  }
 }
 
 bool AssetCache::keepSearchParts(const std::shared_ptr<const Asset>& asset, const PointSearch& search) {
@@ -62,15 +69,7 @@ bool AssetCache::keepSearchParts(const std::shared_ptr<const Asset>& asset, cons
   const uint64_t bytes = asset->search_parts->bytesToKeep(search);
   if (bytes == 0) return true;
   if (it->second->bytes + bytes > capacity_) return false;
-  // Make room from the least recently used end, never evicting the asset the parts belong to.
-  auto victim = lru_.end();
-  while (used_ + bytes > capacity_ && victim != lru_.begin()) {
-    --victim;
-    if (victim == it->second) continue;
-    used_ -= victim->bytes;
-    index_.erase(victim->asset->id);
-    victim = lru_.erase(victim);
-  }
+  makeRoom(bytes, it->second);  // never evicting the asset the parts belong to
   asset->search_parts->keep(search);
   it->second->bytes += bytes;
   used_ += bytes;

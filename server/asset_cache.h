@@ -90,6 +90,9 @@ class AssetCache {
     std::shared_ptr<const Asset> asset;
     uint64_t bytes;
   };
+  /// Evicts from the least recently used end, never `keep`, until `bytes` more fit or nothing else is left. mu_ held.
+  void makeRoom(uint64_t bytes, std::list<Entry>::iterator keep);
+
   mutable std::mutex mu_;
   const uint64_t capacity_;
   uint64_t used_ = 0;
