@@ -40,9 +40,9 @@ std::string algorithmDescription(FieldAlgorithm algorithm, SeedKind seeds, bool 
            "segment comes once the whole field is known";
   if (limited)
     return "separable: an exact EDT, axis by axis, over the bricks within the limit of the seed volume's boundary; "
-           "the first segment comes once those bricks are known";
-  return "separable: an exact EDT over the whole grid, axis by axis; the first segment comes once the whole field is "
-         "known";
+           "with segments and a limit of many bricks the first segment comes first from the bricks within its bound";
+  return "separable: an exact EDT over the whole grid, axis by axis; with segments the first segment comes first "
+         "from the bricks within its bound, the rest once the whole field is known";
 }
 
 std::string FieldPlan::algorithmDescription() const {

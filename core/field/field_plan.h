@@ -42,8 +42,8 @@ std::string_view algorithmName(FieldAlgorithm algorithm);  ///< "band", "separab
 std::optional<FieldAlgorithm> parseAlgorithm(std::string_view name);
 
 /// What the algorithm does for these seeds, for people (the CLI's header line, the docs, the protocol's comment):
-/// e.g. "separable: an exact EDT over the whole grid, axis by axis; the first segment comes once the whole field is
-/// known". `limited`: the query has a finite limit.
+/// e.g. "band: the adaptive iteration on an evolving active band (SMI 2009); segments stream nearest first as the
+/// band passes them". `limited`: the query has a finite limit.
 std::string algorithmDescription(FieldAlgorithm algorithm, SeedKind seeds, bool limited);
 
 /// The sign of a volume whose mask voxels get -distance (FieldRequest::inside_negative); meshes' signs are

@@ -30,6 +30,7 @@ using separable_internal::CellBricks;
 using separable_internal::CellOps;
 using separable_internal::KnownLabels;
 using separable_internal::LabelLineScratch;
+using separable_internal::SegmentWindow;
 using separable_internal::otherLabelLine;
 using separable_internal::parabolaEnvelope;
 using separable_internal::seedLine;
@@ -187,75 +188,129 @@ struct BandSource {
   }
 };
 
+/// The squared-distance bound (units) of the voxels within `units`: on a cubic grid an integer bound on integer
+/// squares.
+template <class Dist>
+Dist squaredCut(double units) {
+  if constexpr (std::is_integral_v<Dist>)
+    return Dist(std::min(std::floor(units * units), double(uint32_t(1) << 31)));
+  else
+    return Dist(units * units);
+}
+
 /// The run on cells C (the seed field's outside, or the multi-label EDT's) and Inside (a signed field's inside).
-/// False when interrupted.
 template <class C, class Inside, class T>
-bool runCells(const Grid& grid, const T* labels, const VolumeMeasure& measure, const FieldRunOptions& options,
-              FieldRunResult* result, const SegmentCallback& on_segment) {
-  const Interrupter* interrupter = options.interrupter;
-  const Vec3d& s = grid.axisScale();
-  const double w2[3] = {s.x * s.x, s.y * s.y, s.z * s.z};
-  const BandMeasure outside_measure{measure.labels, true, measure.black_border};
-  const BandMeasure inside_measure{false, false, 0};
-  const bool signed_field = !measure.labels && measure.inside_negative;
-  if (std::isinf(options.limit_world)) {
+class CellsRun {
+ public:
+  CellsRun(const Grid& grid, const T* labels, const VolumeMeasure& measure, const FieldRunOptions& options,
+           FieldRunResult* result, const SegmentCallback& on_segment)
+      : grid_(grid), labels_(labels), measure_(measure), options_(options), result_(result), on_segment_(on_segment) {
+    const Vec3d& s = grid.axisScale();
+    w2_[0] = s.x * s.x;
+    w2_[1] = s.y * s.y;
+    w2_[2] = s.z * s.z;
+  }
+
+  /// False when interrupted. Near field first: when the field has more than one segment, segment 0 comes from the
+  /// band within its bound (it follows the boundary), then the rest from the whole grid or the band within the limit —
+  /// so a client gets near voxels after a fraction of the work instead of after all of it. The band works in whole
+  /// bricks, so within a limit of a few bricks the first segment's band costs nearly the limit's: there it is
+  /// skipped (docs/benchmarks.md, service_bench).
+  bool run() {
+    const double h = grid_.voxelSize();
+    const double segment = options_.segment_length_world / h, limit = options_.limit_world / h;  // units
+    auto reachBricks = [](double units) { return std::ceil(std::floor(units) / kBrickSize); };
+    const bool near_first =
+        segment > 0 && limit > segment && (std::isinf(limit) || reachBricks(limit) >= 4 * reachBricks(segment));
+    SegmentWindow rest;
+    if (near_first) {
+      if (!classify()) return false;
+      // A little past the segment's bound, so rounding in the sqrt cannot drop one of its voxels (the emission keeps
+      // only segment 0's).
+      using Dist = typename CellOps<C>::Dist;
+      if (!emitWithin(squaredCut<Dist>(segment * (1 + 1e-6)), SegmentWindow{0, 0})) return false;
+      rest.first = 1;
+    }
+    if (std::isinf(limit)) return emitWholeGrid(rest);
+    if (!classify()) return false;
+    return emitWithin(squaredCut<typename CellOps<C>::Dist>(limit), rest);
+  }
+
+ private:
+  bool signedField() const { return !measure_.labels && measure_.inside_negative; }
+  BandMeasure outsideMeasure() const { return {measure_.labels, true, measure_.black_border}; }
+  static constexpr BandMeasure kInsideMeasure{false, false, 0};
+
+  bool classify() {
+    if (!classes_.mask.empty()) return true;
+    classes_ = separable_internal::classifyBricks(grid_, labels_, measure_.labels, options_.interrupter);
+    return !isInterrupted(options_.interrupter);
+  }
+
+  bool emitWholeGrid(SegmentWindow window) {
     GridCells<C> outside;
     GridCells<Inside> inside;
-    if (!wholeGridCells<C, T>(grid.dims(), labels, outside_measure, w2, interrupter, &outside) ||
-        (signed_field && !wholeGridCells<Inside, T>(grid.dims(), labels, inside_measure, w2, interrupter, &inside)))
+    if (!wholeGridCells<C, T>(grid_.dims(), labels_, outsideMeasure(), w2_, options_.interrupter, &outside) ||
+        (signedField() &&
+         !wholeGridCells<Inside, T>(grid_.dims(), labels_, kInsideMeasure, w2_, options_.interrupter, &inside)))
       return false;
-    if (measure.labels)
-      return separable_internal::emitSegments(
-          grid, options, WholeGridSource<C, Inside, T, true>{{grid}, false, labels, outside, inside}, result, on_segment);
+    if (measure_.labels)
+      return separable_internal::emitSegments(grid_, options_,
+                                              WholeGridSource<C, Inside, T, true>{{grid_}, false, labels_, outside, inside},
+                                              result_, on_segment_, window);
     return separable_internal::emitSegments(
-        grid, options, WholeGridSource<C, Inside, T, false>{{grid}, signed_field, labels, outside, inside}, result,
-        on_segment);
+        grid_, options_, WholeGridSource<C, Inside, T, false>{{grid_}, signedField(), labels_, outside, inside},
+        result_, on_segment_, window);
   }
-  // Delivered: squared distance <= limit^2 (units); on a cubic grid an integer bound on integer squares.
-  using Dist = typename CellOps<C>::Dist;
-  const double limit = options.limit_world / grid.voxelSize();
-  Dist cut2;
-  if constexpr (std::is_integral_v<Dist>)
-    cut2 = Dist(std::min(std::floor(limit * limit), double(uint32_t(1) << 31)));
-  else
-    cut2 = Dist(limit * limit);
-  const BrickClasses classes = separable_internal::classifyBricks(grid, labels, measure.labels, interrupter);
-  if (isInterrupted(interrupter)) return false;
-  CellBricks<C> outside;
-  CellBricks<Inside> inside;
-  if (!separable_internal::cellsWithin<C, T>(grid, labels, classes, outside_measure, cut2, w2, interrupter,
-                                             &outside) ||
-      (signed_field && !separable_internal::cellsWithin<Inside, T>(grid, labels, classes, inside_measure,
-                                                                   typename CellOps<Inside>::Dist(cut2), w2,
-                                                                   interrupter, &inside)))
-    return false;
-  auto emit = [&](auto source) {
-    return separable_internal::emitSegments(grid, options, source, result, on_segment);
-  };
-  BandSource<C, Inside, T, false> source{grid, signed_field, labels, cut2, {}, {}, {}};
-  // Voxels delivered at 0 whatever the bricks (an unsigned field's seeds, the multi-label EDT's label 0): the bricks
-  // holding one join the computed ones.
-  std::vector<uint64_t> keys = outside.keys;
-  keys.insert(keys.end(), inside.keys.begin(), inside.keys.end());
-  const uint8_t zero_kind = measure.labels ? separable_internal::kAllMaskVoxels : separable_internal::kNoMaskVoxel;
-  if (measure.labels || !measure.inside_negative)
-    for (size_t b = 0; b < classes.mask.size(); ++b)
-      if (classes.mask[b] != zero_kind) keys.push_back(b);
-  tbb::parallel_sort(keys.begin(), keys.end());
-  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-  source.outside.reserve(keys.size());
-  source.inside.reserve(keys.size());
-  for (uint64_t k : keys) {
-    source.outside.push_back(outside.find(k));
-    source.inside.push_back(inside.find(k));
+
+  /// The voxels within sqrt(cut2) units, from the band's bricks.
+  bool emitWithin(typename CellOps<C>::Dist cut2, SegmentWindow window) {
+    const Interrupter* interrupter = options_.interrupter;
+    CellBricks<C> outside;
+    CellBricks<Inside> inside;
+    if (!separable_internal::cellsWithin<C, T>(grid_, labels_, classes_, outsideMeasure(), cut2, w2_, interrupter,
+                                               &outside) ||
+        (signedField() && !separable_internal::cellsWithin<Inside, T>(grid_, labels_, classes_, kInsideMeasure,
+                                                                      typename CellOps<Inside>::Dist(cut2), w2_,
+                                                                      interrupter, &inside)))
+      return false;
+    BandSource<C, Inside, T, false> source{grid_, signedField(), labels_, cut2, {}, {}, {}};
+    // Voxels delivered at 0 whatever the bricks (an unsigned field's seeds, the multi-label EDT's label 0): the bricks
+    // holding one join the computed ones.
+    std::vector<uint64_t> keys = outside.keys;
+    keys.insert(keys.end(), inside.keys.begin(), inside.keys.end());
+    const uint8_t zero_kind = measure_.labels ? separable_internal::kAllMaskVoxels : separable_internal::kNoMaskVoxel;
+    if (measure_.labels || !measure_.inside_negative)
+      for (size_t b = 0; b < classes_.mask.size(); ++b)
+        if (classes_.mask[b] != zero_kind) keys.push_back(b);
+    tbb::parallel_sort(keys.begin(), keys.end());
+    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+    source.outside.reserve(keys.size());
+    source.inside.reserve(keys.size());
+    for (uint64_t k : keys) {
+      source.outside.push_back(outside.find(k));
+      source.inside.push_back(inside.find(k));
+    }
+    source.keys = std::move(keys);
+    result_->bricks_allocated = int64_t(outside.keys.size() + inside.keys.size());
+    if (measure_.labels)
+      return separable_internal::emitSegments(
+          grid_, options_,
+          BandSource<C, Inside, T, true>{grid_, false, labels_, cut2, std::move(source.keys), std::move(source.outside),
+                                         std::move(source.inside)},
+          result_, on_segment_, window);
+    return separable_internal::emitSegments(grid_, options_, source, result_, on_segment_, window);
   }
-  source.keys = std::move(keys);
-  result->bricks_allocated = int64_t(outside.keys.size() + inside.keys.size());
-  if (measure.labels)
-    return emit(BandSource<C, Inside, T, true>{grid, false, labels, cut2, std::move(source.keys),
-                                                std::move(source.outside), std::move(source.inside)});
-  return emit(std::move(source));
-}
+
+  const Grid& grid_;
+  const T* labels_;
+  const VolumeMeasure& measure_;
+  const FieldRunOptions& options_;
+  FieldRunResult* result_;
+  const SegmentCallback& on_segment_;
+  double w2_[3];
+  BrickClasses classes_;  // made on first use (the bands need it, the whole grid does not)
+};
 
 }  // namespace
 
@@ -278,10 +333,10 @@ FieldRunResult computeSeparableVolumeField(const Grid& grid, const LabelVolume& 
     const bool ok = volume.visit([&](const auto* labels) {
       using T = std::remove_cv_t<std::remove_pointer_t<decltype(labels)>>;
       if (grid.cubic())
-        return nearest ? runCells<Tagged<uint32_t>, uint32_t, T>(grid, labels, measure, options, &result, on_segment)
-                       : runCells<uint32_t, uint32_t, T>(grid, labels, measure, options, &result, on_segment);
-      return nearest ? runCells<Tagged<float>, float, T>(grid, labels, measure, options, &result, on_segment)
-                     : runCells<float, float, T>(grid, labels, measure, options, &result, on_segment);
+        return nearest ? CellsRun<Tagged<uint32_t>, uint32_t, T>(grid, labels, measure, options, &result, on_segment).run()
+                       : CellsRun<uint32_t, uint32_t, T>(grid, labels, measure, options, &result, on_segment).run();
+      return nearest ? CellsRun<Tagged<float>, float, T>(grid, labels, measure, options, &result, on_segment).run()
+                     : CellsRun<float, float, T>(grid, labels, measure, options, &result, on_segment).run();
     });
     result.interrupted = !ok;
     result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

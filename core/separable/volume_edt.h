@@ -23,8 +23,11 @@
 //     (core/separable/internal/limited_band.h), after one read of the volume.
 //   * Streaming: segments of options.segment_length_world, nearest first, each voxel delivered once in the segment
 //     its |distance| falls in (the last one's upper bound is the limit); bricks sorted by origin (z, y, x); chunks
-//     of options.max_chunk_bricks with the last one marked complete; the final segment marked last. Segment 0 comes
-//     after the whole field is known: the separable passes cannot finish near voxels before far ones.
+//     of options.max_chunk_bricks with the last one marked complete; the final segment marked last. Near field
+//     first: the separable passes cannot finish near voxels before far ones, so when there is more than one segment
+//     (and, with a limit, the limit reaches at least four times as many bricks as a segment) segment 0 is computed
+//     first by the band within its bound and streamed, then the rest (whole grid or the limit's band) — the first
+//     bricks after a few percent of the run. When nothing lies past segment 0, an empty segment 1 marks the end.
 //   * Threads: options.threads > 0 runs in a task_arena of that size, else in the caller's. The result is
 //     bit-identical for any thread count. The interrupter is polled per slice, row or run of bricks in every pass
 //     and per brick range while emitting; an interrupted run returns FieldRunResult::interrupted with what it

@@ -47,8 +47,9 @@ class Header:
     # adaptive iteration on an evolving active band (SMI 2009; any seeds), whose segments stream nearest first as the
     # band passes them; or "separable", an exact EDT axis by axis (exact mode, no stencil or second ring asked for):
     # over the whole grid for a seed volume without a limit and for point seeds on few lattice planes without a limit,
-    # over the bricks within the limit of the boundary for a limited seed volume; its first segment comes once that
-    # whole field (or those bricks) is known.
+    # over the bricks within the limit of the boundary for a limited seed volume; a volume's first segment comes
+    # first, from the bricks within its bound (several segments; no limit or one of many bricks), the points' once
+    # the whole field is known.
     algorithm: str
     spacing: tuple = ()     # (x, y, z) voxel size per axis (the wire's order; numpy's is reversed)
     labels: bool = False    # the multi-label EDT

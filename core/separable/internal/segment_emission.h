@@ -11,6 +11,10 @@
 //   the voxel's closest feature (Brick::closest, with options.closest_features; asking a source without features
 //   throws std::invalid_argument). Returns false when options.interrupter stopped it (polled per 64 bricks while
 //   sorting, per 16 while filling, and per chunk).
+// `window` streams only segments [window.first, window.last] of the field, so one run can deliver its near field from
+// one source and the rest from another: a closed window never marks a segment last; an open one (last = kOpen)
+// starting past 0 marks its final segment last, and when nothing lies in it, delivers an empty segment window.first
+// marked complete and last (the end of the stream).
 #pragma once
 
 #include <algorithm>
@@ -47,10 +51,17 @@ struct WholeGridBricks {
   Coord origin(size_t b) const { return grid.brickOrigin(int64_t(b)); }
 };
 
+/// The segments emitSegments delivers (see the contract above).
+struct SegmentWindow {
+  static constexpr int kOpen = std::numeric_limits<int>::max();
+  int first = 0;
+  int last = kOpen;
+};
+
 /// Streams `source` (see the contract above). False when interrupted.
 template <typename Source>
 bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source& source, FieldRunResult* result,
-                  const SegmentCallback& on_segment) {
+                  const SegmentCallback& on_segment, SegmentWindow window = {}) {
   using Clock = std::chrono::steady_clock;
   const Interrupter* interrupter = options.interrupter;
   const double h = grid.voxelSize();
@@ -73,6 +84,7 @@ bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source
         double d;
         if (!source.value(b, off, origin + brickLocal(off), &d)) continue;
         const int s = segmentOf(std::abs(d));
+        if (s < window.first || s > window.last) continue;
         lo = std::min(lo, s);
         hi = std::max(hi, s);
         if (length == 0) break;  // one segment: a voxel is enough
@@ -82,18 +94,21 @@ bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source
     }
   });
   if (isInterrupted(interrupter)) return false;
-  int segments = 1;
+  // One past the final segment delivered: at least window.first + 1 (an empty first segment when nothing is in it).
+  int segments = window.first + 1;
   for (int hi : last) segments = std::max(segments, hi + 1);
+  if (window.last != SegmentWindow::kOpen) segments = std::min(segments, window.last + 1);
   std::vector<std::vector<uint32_t>> by_segment(static_cast<size_t>(segments));
   for (size_t b = 0; b < bricks; ++b)
     for (int s = first[b]; s <= last[b]; ++s) by_segment[size_t(s)].push_back(uint32_t(b));
+  const bool marks_last = window.last == SegmentWindow::kOpen;
   std::vector<int>().swap(first);
   std::vector<int>().swap(last);
 
   // Without chunking a segment is built in one piece, where it is delivered: no second copy of its bricks.
   const size_t per_chunk =
       options.max_chunk_bricks ? std::min<size_t>(options.max_chunk_bricks, 8192) : std::numeric_limits<size_t>::max();
-  for (int s = 0; s < segments; ++s) {
+  for (int s = window.first; s < segments; ++s) {
     const auto ts = Clock::now();
     SegmentStats stats;
     stats.index = s;
@@ -138,7 +153,7 @@ bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source
       p.lower_world = stats.lower_world;
       p.upper_world = stats.upper_world;
       p.complete = done;
-      p.last = done && s + 1 == segments;
+      p.last = done && s + 1 == segments && marks_last;
       p.bricks = std::move(part);
       if (on_segment) on_segment(std::move(p));
       if (done) break;

@@ -117,8 +117,9 @@ TEST(SeparableEdtTest, WithALimitDeliversExactlyTheVoxelsWithinIt) {
   const std::vector<double> exact2 = oracle::edtSqr(d.x, d.y, d.z, mask);
   const std::vector<double> signed_exact = oracle::signedEdt(d.x, d.y, d.z, mask);
   // Limits in voxels; squares that are not integers, so no voxel sits on the limit. 9.7 reaches two bricks away;
-  // 20.5 takes the parabola envelope instead of the window minimum.
-  for (double limit : {0.7, 1.5, 3.3, 5.5, 9.7, 20.5})
+  // 20.5 takes the parabola envelope instead of the window minimum; 40.5 reaches four times a 0.3-segment's bricks,
+  // so its first segment comes from a band of its own (near field first).
+  for (double limit : {0.7, 1.5, 3.3, 5.5, 9.7, 20.5, 40.5})
     for (bool inside_negative : {false, true})
       for (double segment : {0.0, 0.3}) {
         BandOptions o;
@@ -164,6 +165,68 @@ TEST(SeparableEdtTest, WithALimitTheWorkFollowsTheBand) {
     const int64_t side = limit < 8 ? 4 : 6;
     EXPECT_LE(c.result.bricks_allocated, side * side * side) << limit;
     EXPECT_GT(c.result.voxels, 200) << limit;
+  }
+}
+
+// Near field first: with several segments the first one is computed by the band within its bound and streamed before
+// the rest is computed. Stopped when segment 0 is complete, a run has built only that band: no whole grid (which
+// allocates no bricks), and with a limit fewer bricks than the limit's band. Without segments, or with a limit of a
+// few bricks (where the first segment's band costs nearly the limit's), the field is computed once.
+TEST(SeparableEdtTest, NearFieldFirstTheFirstSegmentComesFromItsOwnBand) {
+  const Coord d{96, 80, 72};
+  const Grid grid({0, 0, 0}, 1, d);
+  const std::vector<uint8_t> mask = randomBlobs(d, 4, 21);
+  const LabelVolume volume = LabelVolume::ofMask(d, mask);
+  // Runs `o`, stopping once segment 0 is complete: the bricks allocated when it stopped, the segments seen.
+  auto stoppedAfterSegment0 = [&](BandOptions o, std::vector<int>* seen) {
+    Interrupter stop;
+    o.interrupter = &stop;
+    const FieldRunResult r = computeSeparableVolumeField(grid, volume, {false, true, false}, o, [&](SegmentBricks&& s) {
+      seen->push_back(s.index);
+      if (s.index == 0 && s.complete) stop.cancel(Status::Code::kCancelled, "test");
+    });
+    EXPECT_TRUE(r.interrupted);
+    return r.bricks_allocated;
+  };
+  BandOptions o;
+  o.segment_length_world = 2;
+  o.max_chunk_bricks = 16;
+  std::vector<int> seen;
+  EXPECT_GT(stoppedAfterSegment0(o, &seen), 0) << "segment 0 came from a band, before the whole grid";
+  EXPECT_EQ(seen.back(), 0);
+  // A limit of 40 voxels (5 bricks) against 2-voxel segments (1 brick): the first segment's band is the smaller one.
+  o.limit_world = 40;
+  seen.clear();
+  const int64_t first_band = stoppedAfterSegment0(o, &seen);
+  BandOptions once = o;
+  once.segment_length_world = 0;
+  const Collected whole = run(grid, mask, true, once);
+  EXPECT_GT(first_band, 0);
+  EXPECT_LT(first_band, whole.result.bricks_allocated / 2);
+  // A limit of 10 voxels (2 bricks): computed once, so stopping after segment 0 leaves the limit's whole band.
+  o.limit_world = 10;
+  once.limit_world = 10;
+  seen.clear();
+  EXPECT_EQ(stoppedAfterSegment0(o, &seen), run(grid, mask, true, once).result.bricks_allocated);
+}
+
+// Near field first when every voxel lies in segment 0: the second part has nothing, so an empty segment 1 ends the
+// stream (marked last); every voxel still comes once, exact.
+TEST(SeparableEdtTest, NearFieldFirstEndsWithAnEmptySegmentWhenSegmentZeroHoldsAll) {
+  const Coord d{20, 17, 12};
+  const Grid grid({0, 0, 0}, 1, d);
+  std::vector<uint8_t> mask(size_t(grid.voxelCount()), 1);
+  mask[(size_t(6) * d.y + 8) * d.x + 10] = 0;  // one non-seed voxel, at distance 1
+  BandOptions o;
+  o.segment_length_world = 3;
+  const Collected c = run(grid, mask, false, o);
+  EXPECT_EQ(c.order_error, "");
+  ASSERT_EQ(c.result.segments.size(), 2u);
+  EXPECT_EQ(c.result.segments[1].voxels, 0);
+  EXPECT_EQ(c.result.voxels, grid.voxelCount());
+  for (size_t i = 0; i < c.values.size(); ++i) {
+    ASSERT_EQ(c.times_delivered[i], 1) << i;
+    EXPECT_EQ(c.values[i], mask[i] ? 0.0f : 1.0f) << i;
   }
 }
 
