@@ -1,7 +1,10 @@
 // service_bench: what the network path costs. Starts the real distband-server as a child process on loopback and,
 // in the same run, the server's own query path in this process (bench/server_reference.h) on the same request:
-//   1. full-domain N^3 queries (no limit; points, then the bunny mesh): time until the first segment's bricks reach
-//      the client vs the whole query (goal <= 10 %), and the whole stream vs the in-process run (goal <= 1.2x);
+//   1. full-domain N^3 queries (no limit; points, then the bunny mesh; --volumes adds uploaded seed volumes, with and
+//      without --volume-limit-voxels): time until the first segment's bricks reach the client vs the whole query
+//      (goal <= 10 %), and the whole stream vs the in-process run (goal <= 1.2x); with --baseline-server-bin each
+//      query also runs on that server (another build), alternating, so a change is timed against the code before it
+//      in the same run;
 //   2. --concurrent queries against a server with --max-queries: every query completes with the reference field or
 //      gets RESOURCE_EXHAUSTED; the server's peak RSS is sampled from /proc.
 // Reference: the request resolved and computed by the server's code in this process (resolveQuery ->
@@ -127,6 +130,10 @@ int main(int argc, char** argv) {
   int concurrent = 16, max_queries = 4, load_resolution = 256;
   double load_limit_voxels = 12;
   std::string json_path = DISTBAND_BENCH_DIR "/results/service_bench.json";
+  std::string baseline_bin;
+  std::vector<std::string> volumes;
+  std::vector<double> volume_limits{0, 10};
+  bool point_case = true;
   app.add_option("--server-bin", server_bin, "distband-server binary")->capture_default_str();
   app.add_option("--mesh", mesh_path, "mesh for the mesh case ('' to skip)")->capture_default_str();
   app.add_option("--resolution", resolution, "N of the full-domain N^3 queries")->capture_default_str();
@@ -139,6 +146,14 @@ int main(int argc, char** argv) {
   app.add_option("--load-limit-voxels", load_limit_voxels, "limit of the load-test queries, voxels")
       ->capture_default_str();
   app.add_option("--json", json_path, "JSON output ('' for none)")->capture_default_str();
+  app.add_option("--baseline-server-bin", baseline_bin,
+                 "another distband-server build: each query also runs there, alternating (timed against it)");
+  app.add_option("--volumes", volumes,
+                 "uploaded volume cases KIND:N, KIND shell (a sphere shell, signed: mask-inside) or blobs (40 balls, "
+                 "unsigned)");
+  app.add_option("--volume-limit-voxels", volume_limits, "limits of the volume cases, voxels (0: none)")
+      ->capture_default_str();
+  app.add_option("--point-case", point_case, "run the 1-point full-domain case")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   bench::Verdict verdict("service_bench");
@@ -148,7 +163,9 @@ int main(int argc, char** argv) {
   out["cases"] = nlohmann::json::array();
   std::string md = fmt::format(
       "| case | in-process s | stream s | stream / in-process | first bricks s | first / total | MB streamed | "
-      "field equal |\n|---|---|---|---|---|---|---|---|\n");
+      "field equal |{}\n|---|---|---|---|---|---|---|---|{}\n",
+      baseline_bin.empty() ? "" : " baseline stream s | baseline first / total | stream / baseline |",
+      baseline_bin.empty() ? "" : "---|---|---|");
 
   // The reference side: the same bytes the server is sent, parsed by the server's own code.
   ServerReference reference;
@@ -175,11 +192,20 @@ int main(int argc, char** argv) {
 
   try {
     {
-      ServerProcess server(server_bin, {"--threads", std::to_string(threads), "--max-queries", "4"});
+      const std::vector<std::string> server_args{"--threads",          std::to_string(threads),
+                                                 "--max-queries",      "4",
+                                                 "--max-upload-bytes", std::to_string(uint64_t(1) << 30)};
+      ServerProcess server(server_bin, server_args);
       RemoteClient client(server.target());
+      std::optional<ServerProcess> baseline;
+      std::optional<RemoteClient> baseline_client;
+      if (!baseline_bin.empty()) {
+        baseline.emplace(baseline_bin, server_args);
+        baseline_client.emplace(baseline->target());
+      }
 
       std::vector<Case> cases;
-      {  // one point near a corner: the field grows over the whole domain, many segments
+      if (point_case) {  // one point near a corner: the field grows over the whole domain, many segments
         const Vec3d p{resolution * 0.3 + 0.25, resolution * 0.4 + 0.5, resolution * 0.35 + 0.1};
         cases.push_back({fmt::format("1 point, {}^3, full domain", resolution),
                          pointsRequest({p}, {resolution, resolution, resolution}, 1.0, segment_voxels, 0)});
@@ -191,6 +217,38 @@ int main(int argc, char** argv) {
         c.request.set_segment_length(segment_voxels * voxelSizeOf(reference, c.request));
         cases.push_back(std::move(c));
       }
+      for (const std::string& spec : volumes) {
+        const size_t colon = spec.find(':');
+        const std::string kind = spec.substr(0, colon);
+        const int n = colon == std::string::npos ? resolution : std::stoi(spec.substr(colon + 1));
+        if (kind != "shell" && kind != "blobs") throw std::runtime_error("--volumes: unknown kind " + kind);
+        const std::vector<uint8_t> mask = kind == "shell" ? bench::sphereShellMask(n) : bench::randomBlobsMask(n);
+        v1::Dims dims;
+        dims.set_x(uint32_t(n));
+        dims.set_y(uint32_t(n));
+        dims.set_z(uint32_t(n));
+        std::string id, bytes(mask.begin(), mask.end());
+        if (Status e = reference.addVolume(dims, bytes, kind, &id); !e.ok())
+          throw std::runtime_error("reference volume: " + e.toString());
+        for (RemoteClient* to : {&client, baseline_client ? &*baseline_client : nullptr}) {
+          if (!to) continue;
+          v1::UploadReply up;
+          if (grpc::Status st = to->uploadVolumeBytes({n, n, n}, v1::VOXEL_TYPE_UINT8, mask, kind, &up); !st.ok())
+            throw std::runtime_error("volume upload failed: " + st.error_message());
+          if (up.asset_id() != id) verdict.fail("upload", "the server's volume id differs from the reference's");
+        }
+        for (double limit : volume_limits) {
+          Case c{fmt::format("{} volume{}, {}^3, {}", kind, kind == "shell" ? " (signed)" : "", n,
+                             limit > 0 ? fmt::format("limit {} voxels", limit) : std::string("full domain")),
+                 {}};
+          c.request.set_asset_id(id);
+          c.request.mutable_grid()->set_voxel_size(1.0);
+          if (kind == "shell") c.request.set_sign(v1::SIGN_MODE_MASK_INSIDE);
+          if (limit > 0) c.request.set_limit_voxels(limit);
+          c.request.set_segment_length(segment_voxels);
+          cases.push_back(std::move(c));
+        }
+      }
 
       for (const Case& c : cases) {
         ResolvedQuery q;
@@ -198,7 +256,7 @@ int main(int argc, char** argv) {
           verdict.fail(c.name, "the reference cannot resolve the request: " + s.toString());
           continue;
         }
-        std::vector<double> inproc, stream, first;
+        std::vector<double> inproc, stream, first, base_stream, base_first;
         std::optional<DeliveredField> ref;
         double mb = 0;
         bool equal = true;
@@ -220,6 +278,20 @@ int main(int argc, char** argv) {
           }
           stream.push_back(rm.result.total_seconds);
           first.push_back(rm.result.first_bricks_seconds);
+          if (baseline_client) {
+            Remote base = runRemote(*baseline_client, c.request);
+            if (!base.result.status.ok()) {
+              verdict.fail(c.name, q.grid, "baseline query failed: " + base.result.status.error_message());
+            } else {
+              base_stream.push_back(base.result.total_seconds);
+              base_first.push_back(base.result.first_bricks_seconds);
+              if (const FieldDiff d = compareFields(*ref, base.kept.field(base.result.grid), FieldTolerance::exact());
+                  !d.ok)
+                verdict.fail(c.name, q.grid, "the baseline's field is not the reference: " + d.describe());
+              fmt::print(stderr, "{} run {}: baseline stream {:.3f}s, first bricks {:.3f}s\n", c.name, i,
+                         base.result.total_seconds, base.result.first_bricks_seconds);
+            }
+          }
           mb = rm.result.wire_bytes / 1e6;
           const FieldDiff d = compareFields(*ref, rm.kept.field(rm.result.grid), FieldTolerance::exact());
           if (!d.ok) {
@@ -234,12 +306,31 @@ int main(int argc, char** argv) {
         }
         if (stream.empty()) continue;
         const double ip = bench::median(inproc), st = bench::median(stream), fb = bench::median(first);
-        md += fmt::format("| {} | {:.3f} | {:.3f} | {:.2f}x | {:.3f} | {:.1f} % | {:.1f} | {} |\n", c.name, ip, st,
+        md += fmt::format("| {} | {:.3f} | {:.3f} | {:.2f}x | {:.3f} | {:.1f} % | {:.1f} | {} |", c.name, ip, st,
                           st / ip, fb, 100 * fb / st, mb, equal ? "yes" : "NO");
-        out["cases"].push_back({{"case", c.name}, {"in_process_s", ip}, {"stream_s", st}, {"ratio", st / ip},
-                                {"first_bricks_s", fb}, {"first_fraction", fb / st}, {"mb", mb},
-                                {"segment_voxels", segment_voxels}, {"field_equal", equal},
-                                {"in_process_runs", inproc}, {"stream_runs", stream}, {"first_runs", first}});
+        nlohmann::json row{{"case", c.name},
+                           {"in_process_s", ip},
+                           {"stream_s", st},
+                           {"ratio", st / ip},
+                           {"first_bricks_s", fb},
+                           {"first_fraction", fb / st},
+                           {"mb", mb},
+                           {"segment_voxels", segment_voxels},
+                           {"field_equal", equal},
+                           {"in_process_runs", inproc},
+                           {"stream_runs", stream},
+                           {"first_runs", first}};
+        if (!base_stream.empty()) {
+          const double bs = bench::median(base_stream), bf = bench::median(base_first);
+          md += fmt::format(" {:.3f} | {:.1f} % | {:.2f}x |", bs, 100 * bf / bs, st / bs);
+          row["baseline_stream_s"] = bs;
+          row["baseline_first_fraction"] = bf / bs;
+          row["stream_vs_baseline"] = st / bs;
+          row["baseline_stream_runs"] = base_stream;
+          row["baseline_first_runs"] = base_first;
+        }
+        md += "\n";
+        out["cases"].push_back(std::move(row));
       }
     }
 
