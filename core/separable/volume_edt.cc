@@ -51,6 +51,7 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
   const bool nonzero = measure.seeds_nonzero;
   GridCells<C>& D = *out;
   D.resize(slice * nz);
+  constexpr int kColumns = 16;  // passes 2 and 3 work on this many neighbouring columns at once
   // Whole lines: their ends are the grid's faces.
   const KnownLabels whole_x = KnownLabels::wholeLine(0, measure.black_border),
                     whole_y = KnownLabels::wholeLine(1, measure.black_border),
@@ -58,8 +59,8 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
   // Passes 1 and 2, slice by slice: rows along x, then columns along y inside the (cache-resident) slice.
   tbb::parallel_for(tbb::blocked_range<int>(0, nz), [&](const tbb::blocked_range<int>& r) {
     const size_t n = size_t(std::max(nx, ny));
-    std::vector<C> col(n), res(n);
-    std::vector<T> col_labels(n);
+    std::vector<C> cols(kColumns * size_t(ny)), res(n);
+    std::vector<T> col_labels(multi ? kColumns * size_t(ny) : 0);
     std::vector<int> v(n);
     std::vector<double> zz(2 * n + 2);
     LabelLineScratch<C> runs{int(n)};
@@ -78,21 +79,36 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
               [&](int i) -> const C& { return out[i]; }, [&](int i, const C& c) { out[i] = c; });
         }
       }
-      for (int x = 0; x < nx; ++x) {
-        for (int y = 0; y < ny; ++y) col[size_t(y)] = s[size_t(y) * nx + x];
-        if (multi) {
-          for (int y = 0; y < ny; ++y) col_labels[size_t(y)] = m[size_t(y) * nx + x];
-          otherLabelLine<C, T>(col_labels.data(), ny, whole_y, col.data(), res.data(), w2[1], runs);
-        } else {
-          parabolaEnvelope(col.data(), res.data(), ny, w2[1], v.data(), zz.data());
+      // Columns along y, kColumns neighbours at a time: each y reads and writes whole cache lines (one column at a
+      // time, the strided copies in and out were a third of passes 1 and 2).
+      for (int x0 = 0; x0 < nx; x0 += kColumns) {
+        const int w = std::min(kColumns, nx - x0);
+        for (int y = 0; y < ny; ++y) {
+          const C* row = s + size_t(y) * nx + x0;
+          for (int i = 0; i < w; ++i) cols[size_t(i) * ny + y] = row[i];
+          if (multi) {
+            const T* label_row = m + size_t(y) * nx + x0;
+            for (int i = 0; i < w; ++i) col_labels[size_t(i) * ny + y] = label_row[i];
+          }
         }
-        for (int y = 0; y < ny; ++y) s[size_t(y) * nx + x] = res[size_t(y)];
+        for (int i = 0; i < w; ++i) {
+          C* col = cols.data() + size_t(i) * ny;
+          if (multi) {
+            otherLabelLine<C, T>(col_labels.data() + size_t(i) * ny, ny, whole_y, col, col, w2[1], runs);
+          } else {
+            parabolaEnvelope(col, res.data(), ny, w2[1], v.data(), zz.data());
+            std::copy(res.begin(), res.begin() + ny, col);
+          }
+        }
+        for (int y = 0; y < ny; ++y) {
+          C* row = s + size_t(y) * nx + x0;
+          for (int i = 0; i < w; ++i) row[i] = cols[size_t(i) * ny + y];
+        }
       }
     }
   });
   if (isInterrupted(interrupter)) return false;
-  // Pass 3, along z: 16 neighbouring columns at a time, so each z reads whole cache lines.
-  constexpr int kColumns = 16;
+  // Pass 3, along z: kColumns neighbouring columns at a time, so each z reads whole cache lines.
   tbb::parallel_for(tbb::blocked_range<int>(0, ny), [&](const tbb::blocked_range<int>& r) {
     const size_t n = static_cast<size_t>(nz);
     std::vector<C> cols(kColumns * n), res(n);
