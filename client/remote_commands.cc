@@ -510,9 +510,11 @@ CliCommand registerUpload(CLI::App& app, const CliContext& ctx) {
             }
             ctx.out << up.asset_id() << "\n";
             if (up.has_mesh())
-              ctx.out << fmt::format("mesh: {} vertices, {} triangles, {} degenerate dropped, {} boundary edges\n",
-                                     up.mesh().vertices(), up.mesh().triangles(), up.mesh().degenerate_triangles(),
-                                     up.mesh().boundary_edges());
+              ctx.out << fmt::format(
+                  "mesh: {} vertices, {} triangles, {} degenerate dropped, {} boundary edges{}\n", up.mesh().vertices(),
+                  up.mesh().triangles(), up.mesh().degenerate_triangles(), up.mesh().boundary_edges(),
+                  up.mesh().reoriented_faces() ? fmt::format(", {} faces re-oriented", up.mesh().reoriented_faces())
+                                               : "");
             ctx.out << fmt::format("{} bytes{}\n", up.bytes(), up.already_cached() ? " (already cached)" : "");
             return kExitOk;
           }};

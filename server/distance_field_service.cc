@@ -334,6 +334,7 @@ grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
     m->set_triangles(uint64_t(r.triangles));
     m->set_degenerate_triangles(uint64_t(r.degenerate));
     m->set_boundary_edges(uint64_t(r.boundary_edges));
+    m->set_reoriented_faces(uint64_t(r.reoriented_faces));
     for (auto [dst, src] : {std::pair{m->mutable_bounds()->mutable_min(), r.bbox_min},
                             std::pair{m->mutable_bounds()->mutable_max(), r.bbox_max}}) {
       dst->set_x(src.x);

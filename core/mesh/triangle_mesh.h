@@ -1,10 +1,14 @@
 // TriangleMesh: an indexed triangle soup loaded from a file (OBJ, OFF, PLY, STL ascii/binary) and validated.
 // Contract: after loadMesh() or validateMesh() succeed, the mesh is non-empty, every coordinate is finite, every
 // index is < vertices.size(), no triangle has zero area, and vertices that share an exact position are welded
-// (so edges shared by triangles from different file groups are recognised as shared). MeshReport says what was
-// found, including what was dropped. Errors are a Status (kInvalidArgument for malformed input, kNotFound for a
-// missing file, kIoError for a file that cannot be read, the interrupter's status when it stopped the work) whose
-// message names the file and the problem; malformed input never asserts or crashes. Plain value types; not synchronised.
+// (so edges shared by triangles from different file groups are recognised as shared). A closed (edge-manifold)
+// component whose faces disagree on orientation (two faces running a shared edge the same way: a patch flipped
+// against the rest, which would flip its signs) is re-oriented consistently and outward (positive signed volume);
+// consistent components are never touched, so a wholly inward mesh stays inward, and a non-orientable component is
+// left as it is. MeshReport says what was found, including what was dropped and re-oriented. Errors are a Status
+// (kInvalidArgument for malformed input, kNotFound for a missing file, kIoError for a file that cannot be read, the
+// interrupter's status when it stopped the work) whose message names the file and the problem; malformed input never
+// asserts or crashes. Plain value types; not synchronised.
 #pragma once
 
 #include <array>
@@ -30,6 +34,7 @@ struct MeshReport {
   int64_t non_triangles = 0;       ///< point/line primitives in the file, skipped
   int64_t boundary_edges = 0;      ///< edges used by exactly one kept triangle (0 for a closed mesh)
   int64_t non_manifold_edges = 0;  ///< edges used by more than two kept triangles
+  int64_t reoriented_faces = 0;    ///< faces flipped to make closed components consistent and outward
   Vec3d bbox_min, bbox_max;        ///< world bounding box of the kept triangles' vertices
 
   bool closed() const { return boundary_edges == 0 && non_manifold_edges == 0; }
@@ -45,9 +50,10 @@ inline constexpr uint64_t kMaxMeshFileBytes = uint64_t(4) << 30;
 Status loadMesh(const std::string& path, TriangleMesh* mesh, MeshReport* report);
 
 /// Validates an in-memory mesh in place: rejects an empty mesh, non-finite coordinates and out-of-range
-/// indices; welds identical positions, drops degenerate triangles and unreferenced vertices, and fills `report`
-/// (may be null). On error the mesh is unspecified (the interrupter's status when it stopped the work). Memory: ~40
-/// bytes per vertex and 24 per triangle beyond the mesh itself.
+/// indices; welds identical positions, drops degenerate triangles and unreferenced vertices, re-orients closed
+/// components whose faces disagree (see the contract above), and fills `report` (may be null). On error the mesh
+/// is unspecified (the interrupter's status when it stopped the work). Memory: ~40 bytes per vertex and 24 per
+/// triangle beyond the mesh itself (the re-orientation, when needed, stays within that).
 Status validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* interrupter = nullptr);
 
 }  // namespace distband

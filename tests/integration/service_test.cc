@@ -59,6 +59,24 @@ std::string cubeObj(double lo, double hi) {
   return s;
 }
 
+// A closed mesh with one face (two triangles) reversed is repaired on upload, and the reply says so.
+TEST(ServiceTest, MeshUploadReportsReorientedFaces) {
+  TestServer ts;
+  std::string obj = cubeObj(-1.0, 1.0);
+  const size_t face = obj.find("f 1 3 4 2");
+  ASSERT_NE(face, std::string::npos);
+  obj.replace(face, 9, "f 1 2 4 3");
+  v1::UploadReply up;
+  grpc::Status st = ts.client().uploadMesh(obj, v1::MESH_FORMAT_OBJ, "flipped.obj", &up);
+  ASSERT_TRUE(st.ok()) << st.error_message();
+  EXPECT_EQ(up.mesh().boundary_edges(), 0u);
+  EXPECT_EQ(up.mesh().reoriented_faces(), 2u);
+  v1::UploadReply intact;
+  st = ts.client().uploadMesh(cubeObj(-1.0, 1.0), v1::MESH_FORMAT_OBJ, "cube.obj", &intact);
+  ASSERT_TRUE(st.ok()) << st.error_message();
+  EXPECT_EQ(intact.mesh().reoriented_faces(), 0u);
+}
+
 TEST(ServiceTest, PointQueryStreamsTheInProcessFieldBitForBit) {
   TestServer ts;
   const Coord dims{48, 40, 56};

@@ -1,16 +1,20 @@
 // Tests for core/mesh/triangle_mesh (loading and validation) and core/mesh/mesh_grid.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
+#include <utility>
 
 #include <gtest/gtest.h>
 
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/status.h"
+#include "tests/support/brute_mesh.h"
 #include "tests/support/status_testing.h"
 
 namespace distband {
@@ -175,6 +179,132 @@ TEST(ValidateMeshTest, RejectsBadInMemoryMeshes) {
   EXPECT_TRUE(IsError(validateMesh(&oor, nullptr), Status::Code::kInvalidArgument, "vertex 3"));
   TriangleMesh nan{{{0, 0, 0}, {NAN, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}};
   EXPECT_TRUE(IsError(validateMesh(&nan, nullptr), Status::Code::kInvalidArgument, "non-finite"));
+}
+
+// Orientation repair. Vertex ids are renumbered by validateMesh, so faces are compared by corner positions.
+using FacePositions = std::vector<std::array<Vec3d, 3>>;
+FacePositions facePositions(const TriangleMesh& m) {
+  FacePositions f;
+  for (const auto& t : m.triangles) f.push_back({m.vertices[t[0]], m.vertices[t[1]], m.vertices[t[2]]});
+  return f;
+}
+bool samePositions(const std::array<Vec3d, 3>& a, const std::array<Vec3d, 3>& b) {
+  for (int i = 0; i < 3; ++i)
+    if (a[i].x != b[i].x || a[i].y != b[i].y || a[i].z != b[i].z) return false;
+  return true;
+}
+// Every edge's faces run it in opposite directions (each directed edge once, and its reverse present).
+bool consistentlyOriented(const TriangleMesh& m) {
+  std::map<std::pair<uint32_t, uint32_t>, int> directed;
+  for (const auto& t : m.triangles)
+    for (int e = 0; e < 3; ++e) ++directed[{t[e], t[(e + 1) % 3]}];
+  for (const auto& [edge, count] : directed)
+    if (count != 1 || !directed.count({edge.second, edge.first})) return false;
+  return true;
+}
+double signedVolume(const TriangleMesh& m, size_t first = 0, size_t end = SIZE_MAX) {
+  double v = 0;
+  for (size_t i = first; i < std::min(end, m.triangles.size()); ++i) {
+    const auto& t = m.triangles[i];
+    v += m.vertices[t[0]].dot(m.vertices[t[1]].cross(m.vertices[t[2]])) / 6;
+  }
+  return v;
+}
+void flipFace(TriangleMesh* m, size_t i) { std::swap(m->triangles[i][1], m->triangles[i][2]); }
+// A closed outward UV sphere, and the same validated (the reference for positions).
+TriangleMesh sphere(const Vec3d& c = {0.1, -0.2, 0.3}) { return testing::makeSphereMesh(c, 1.0, 8, 16); }
+
+TEST(ValidateMeshTest, AFlippedPatchOfAClosedMeshIsReorientedOutward) {
+  TriangleMesh reference = sphere();
+  ASSERT_TRUE(IsOk(validateMesh(&reference, nullptr)));
+  const size_t n = reference.triangles.size();
+  ASSERT_TRUE(consistentlyOriented(reference));
+  // A small patch (faces 0..19) and a large one (all but the last 20): the repaired mesh is unique (consistent and
+  // outward), so the faces flipped are exactly the patch, whichever side the traversal starts on.
+  for (size_t patch_end : {size_t(20), n - 20}) {
+    TriangleMesh m = sphere();
+    for (size_t i = 0; i < patch_end; ++i) flipFace(&m, i);
+    MeshReport r;
+    ASSERT_TRUE(IsOk(validateMesh(&m, &r)));
+    EXPECT_TRUE(r.closed()) << r.summary();
+    EXPECT_EQ(r.reoriented_faces, int64_t(patch_end)) << r.summary();
+    EXPECT_NE(r.summary().find(std::to_string(patch_end) + " faces re-oriented"), std::string::npos) << r.summary();
+    EXPECT_TRUE(consistentlyOriented(m));
+    EXPECT_GT(signedVolume(m), 0);
+    EXPECT_NEAR(signedVolume(m), signedVolume(reference), 1e-12);
+    const FacePositions got = facePositions(m), want = facePositions(reference);
+    ASSERT_EQ(got.size(), want.size());
+    for (size_t i = 0; i < n; ++i) EXPECT_TRUE(samePositions(got[i], want[i])) << "face " << i;
+  }
+}
+
+TEST(ValidateMeshTest, AConsistentlyInwardMeshIsNotFlipped) {
+  TriangleMesh m = sphere();
+  for (size_t i = 0; i < m.triangles.size(); ++i) flipFace(&m, i);
+  TriangleMesh inward = m;
+  ASSERT_TRUE(IsOk(validateMesh(&inward, nullptr)));  // nothing to repair: the reference is itself
+  MeshReport r;
+  ASSERT_TRUE(IsOk(validateMesh(&m, &r)));
+  EXPECT_TRUE(r.closed());
+  EXPECT_EQ(r.reoriented_faces, 0);
+  EXPECT_EQ(r.summary().find("re-oriented"), std::string::npos) << r.summary();
+  EXPECT_LT(signedVolume(m), 0);  // today's behaviour: consistent meshes are taken as they are
+  EXPECT_EQ(m.triangles, inward.triangles);
+}
+
+TEST(ValidateMeshTest, OpenNonManifoldAndNonOrientableMeshesAreNotReoriented) {
+  auto expectUntouched = [](TriangleMesh m, const char* what) -> MeshReport {
+    MeshReport r;
+    const TriangleMesh before = m;
+    EXPECT_TRUE(IsOk(validateMesh(&m, &r))) << what;
+    EXPECT_EQ(r.reoriented_faces, 0) << what << ": " << r.summary();
+    const FacePositions got = facePositions(m), want = facePositions(before);
+    EXPECT_EQ(got.size(), want.size()) << what;
+    for (size_t i = 0; i < std::min(got.size(), want.size()); ++i)
+      EXPECT_TRUE(samePositions(got[i], want[i])) << what << ": face " << i;
+    return r;
+  };
+  // Open: a sphere with a face removed and a patch flipped.
+  TriangleMesh open = sphere();
+  open.triangles.pop_back();
+  for (size_t i = 0; i < 20; ++i) flipFace(&open, i);
+  EXPECT_EQ(expectUntouched(open, "open").boundary_edges, 3);
+  // Non-manifold: a sphere with a patch flipped and a face doubled (its three edges then have three faces).
+  TriangleMesh fin = sphere();
+  for (size_t i = 0; i < 20; ++i) flipFace(&fin, i);
+  fin.triangles.push_back(fin.triangles[40]);
+  EXPECT_EQ(expectUntouched(fin, "non-manifold").non_manifold_edges, 3);
+  // Non-orientable but closed: the 6-vertex projective plane (every edge in exactly two faces, some necessarily
+  // run the same way), vertices on the moment curve so that no triangle is degenerate.
+  TriangleMesh rp2;
+  for (int i = 1; i <= 6; ++i) rp2.vertices.push_back({double(i), double(i * i), double(i * i * i)});
+  rp2.triangles = {{0, 1, 2}, {0, 2, 3}, {0, 3, 4}, {0, 4, 5}, {0, 5, 1},
+                   {1, 2, 4}, {2, 3, 5}, {3, 4, 1}, {4, 5, 2}, {5, 1, 3}};
+  EXPECT_TRUE(expectUntouched(rp2, "projective plane").closed());
+}
+
+TEST(ValidateMeshTest, OnlyTheInconsistentComponentIsReoriented) {
+  // First component: consistent but inward (kept); second, disjoint: outward with a flipped patch (repaired).
+  TriangleMesh a = sphere({0, 0, 0}), b = sphere({5, 0, 0});
+  for (size_t i = 0; i < a.triangles.size(); ++i) flipFace(&a, i);
+  for (size_t i = 10; i < 30; ++i) flipFace(&b, i);
+  const size_t na = a.triangles.size();
+  TriangleMesh both = a;
+  const uint32_t offset = uint32_t(a.vertices.size());
+  both.vertices.insert(both.vertices.end(), b.vertices.begin(), b.vertices.end());
+  for (auto t : b.triangles) both.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  TriangleMesh reference = both;
+  for (size_t i = na + 10; i < na + 30; ++i) flipFace(&reference, i);  // what the repair should give
+  ASSERT_TRUE(IsOk(validateMesh(&reference, nullptr)));
+  MeshReport r;
+  ASSERT_TRUE(IsOk(validateMesh(&both, &r)));
+  EXPECT_TRUE(r.closed());
+  EXPECT_EQ(r.reoriented_faces, 20) << r.summary();
+  EXPECT_LT(signedVolume(both, 0, na), 0);
+  EXPECT_GT(signedVolume(both, na), 0);
+  const FacePositions got = facePositions(both), want = facePositions(reference);
+  ASSERT_EQ(got.size(), want.size());
+  for (size_t i = 0; i < got.size(); ++i) EXPECT_TRUE(samePositions(got[i], want[i])) << "face " << i;
 }
 
 TEST(MeshGridTest, ResolutionSpansTheLongestSideIncludingPadding) {

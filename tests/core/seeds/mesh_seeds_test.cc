@@ -117,6 +117,43 @@ TEST(TestShapes, AreClosedAndOutward) {
   EXPECT_NEAR(bruteWinding(analyticShapes()[2].mesh, {0.3, -0.2, 0.1}), 0.0, 1e-9);  // the torus hole
 }
 
+// A closed sphere with a cap of faces flipped against the rest (it still counts as closed, so the automatic sign is
+// the pseudonormal one): after validateMesh's orientation repair the pseudonormal signs are those of the intact
+// sphere at every voxel farther than half a voxel from the surface. Without the repair the cap's signs flip.
+TEST(MeshSeedsTest, AFlippedPatchIsRepairedBeforeThePseudonormalSign) {
+  const Vec3d c{0.3, -0.2, 0.1};
+  TriangleMesh intact = testing::makeSphereMesh(c, 1.0, 24, 48), patched = intact;
+  int64_t cap = 0;
+  for (auto& t : patched.triangles) {
+    const Vec3d centroid = (patched.vertices[t[0]] + patched.vertices[t[1]] + patched.vertices[t[2]]) * (1.0 / 3);
+    if (centroid.z > c.z + 0.5) std::swap(t[1], t[2]), ++cap;
+  }
+  ASSERT_GT(cap, 100);
+  MeshReport ri, rp;
+  ASSERT_TRUE(IsOk(validateMesh(&intact, &ri)));
+  ASSERT_TRUE(IsOk(validateMesh(&patched, &rp)));
+  EXPECT_TRUE(rp.closed());
+  EXPECT_EQ(rp.reoriented_faces, cap) << rp.summary();
+  const Grid grid = gridFor(intact, 36, 3);
+  MeshSeedOptions so;
+  so.sign = SignMethod::kPseudonormal;
+  const double inf = std::numeric_limits<double>::infinity();
+  const DenseField want = compute(grid, intact, so, inf), got = compute(grid, patched, so, inf);
+  ASSERT_EQ(got.written(), grid.voxelCount());
+  int64_t compared = 0, sign_errors = 0;
+  const Coord d = grid.dims();
+  for (int z = 0; z < d.z; ++z)
+    for (int y = 0; y < d.y; ++y)
+      for (int x = 0; x < d.x; ++x) {
+        const float w = want.at({x, y, z}), g = got.at({x, y, z});
+        if (std::abs(w) <= 0.5 * grid.voxelSize()) continue;
+        ++compared;
+        if ((w < 0) != (g < 0)) ++sign_errors;
+      }
+  EXPECT_GT(compared, grid.voxelCount() / 2);
+  EXPECT_EQ(sign_errors, 0) << "of " << compared;
+}
+
 // Every voxel of a full (unlimited) field, every sign method: distances within the tessellation error of the
 // analytic SDF, and every sign correct where the mesh and the shape agree on it. With cubic26 the triangle-id
 // propagation finds every voxel's closest triangle here; the default fcc12 (about half the time) offers each voxel
