@@ -123,6 +123,10 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
         for (int z = 0; z < nz; ++z) {
           const size_t at = size_t(z) * slice + size_t(y) * nx + x0;
           const C* row = D.data() + at;
+          if (z + 8 < nz) {  // the next slices' lines: a slice apart, no hardware prefetcher follows them
+            __builtin_prefetch(row + 8 * slice);
+            if (multi) __builtin_prefetch(labels + at + 8 * slice);
+          }
           for (int i = 0; i < w; ++i) cols[size_t(i) * nz + z] = row[i];
           if (multi)
             for (int i = 0; i < w; ++i) col_labels[size_t(i) * nz + z] = labels[at + i];
