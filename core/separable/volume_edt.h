@@ -34,7 +34,9 @@
 //     delivered so far.
 //   * Memory: whole grid, 4 bytes per grid voxel (8 when signed or with nearest labels); with a limit, 2 KiB per
 //     visited brick (twice when signed or with nearest labels) and five bytes per grid brick; plus one chunk of output
-//     bricks. FieldRunResult::bricks_allocated counts the bricks holding distances at the end (with a limit).
+//     bricks; near field first adds nothing to the peak (its band is freed before the rest is computed).
+//     FieldRunResult::bricks_allocated counts the bricks holding distances in the last band computed: the
+//     limit's, or without a limit the first segment's when the near field came first (0 otherwise).
 // Errors (the volume's dims, the grid, checkVolumeMeasure's conditions, a limit that is not > 0, closest features of
 // the multi-label EDT) throw std::invalid_argument, like the engine's preconditions.
 #pragma once
