@@ -23,7 +23,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (extent < 0) __builtin_trap();
     elements *= uint64_t(extent);
   }
-  const uint64_t item = array.descr.size() >= 3 ? uint64_t(array.descr.back() - '0') : 0;
-  if (item > 0 && item <= 8 && array.data.size() != elements * item) __builtin_trap();
+  // The item size is every digit after the (optional) byte-order and the kind characters ("<f4" -> 4, "c16" -> 16).
+  const std::string& d = array.descr;
+  const size_t digits = !d.empty() && (d[0] == '<' || d[0] == '>' || d[0] == '|' || d[0] == '=') ? 2 : 1;
+  uint64_t item = 0;
+  for (size_t i = digits; i < d.size(); ++i) {
+    const char c = d[i];
+    if (c < '0' || c > '9') __builtin_trap();  // the reader accepted a dtype it cannot size
+    item = item * 10 + uint64_t(c - '0');
+  }
+  if (item == 0 || array.data.size() != elements * item) __builtin_trap();
   return 0;
 }
