@@ -40,6 +40,58 @@ using separable_internal::WholeGridBricks;
 template <class C>
 using GridCells = std::vector<C, NoInitAllocator<C>>;  // a cell per grid voxel
 
+/// Passes 2 and 3 work on this many neighbouring columns at once, so each step along the axis reads and writes whole
+/// cache lines (one column at a time, the strided copies in and out were a third of passes 1 and 2).
+constexpr int kColumns = 16;
+
+/// Per-thread scratch of columnPass for lines of up to n voxels.
+template <class C, class T>
+struct ColumnScratch {
+  std::vector<C> cols, res;
+  std::vector<T> labels;
+  std::vector<int> v;
+  std::vector<double> z;
+  LabelLineScratch<C> runs;
+  ColumnScratch(int n, bool multi)
+      : cols(kColumns * size_t(n)),
+        res(size_t(n)),
+        labels(multi ? kColumns * size_t(n) : 0),
+        v(size_t(n)),
+        z(2 * size_t(n) + 2),
+        runs(n) {}
+};
+
+/// One pass over `w` <= kColumns neighbouring lines of n cells: line i's voxel k is cells[k * stride + i] (its label
+/// labels[k * stride + i]; null for the seed field, whose pass is the parabola envelope). Copied in, computed, copied
+/// back. `prefetch`: the lines are far apart (a slice), so ask for the cells eight steps ahead.
+template <class C, class T>
+void columnPass(C* cells, const T* labels, size_t stride, int n, int w, const KnownLabels& known, double w2,
+                bool prefetch, ColumnScratch<C, T>& s) {
+  for (int k = 0; k < n; ++k) {
+    const size_t at = size_t(k) * stride;
+    if (prefetch && k + 8 < n) {  // no hardware prefetcher follows lines a slice apart
+      __builtin_prefetch(cells + at + 8 * stride);
+      if (labels) __builtin_prefetch(labels + at + 8 * stride);
+    }
+    for (int i = 0; i < w; ++i) s.cols[size_t(i) * n + k] = cells[at + i];
+    if (labels)
+      for (int i = 0; i < w; ++i) s.labels[size_t(i) * n + k] = labels[at + i];
+  }
+  for (int i = 0; i < w; ++i) {
+    C* col = s.cols.data() + size_t(i) * n;
+    if (labels) {
+      otherLabelLine<C, T>(s.labels.data() + size_t(i) * n, n, known, col, col, w2, s.runs);
+    } else {
+      parabolaEnvelope(col, s.res.data(), n, w2, s.v.data(), s.z.data());
+      std::copy(s.res.begin(), s.res.begin() + n, col);
+    }
+  }
+  for (int k = 0; k < n; ++k) {
+    C* row = cells + size_t(k) * stride;
+    for (int i = 0; i < w; ++i) row[i] = s.cols[size_t(i) * n + k];
+  }
+}
+
 /// The whole grid: every voxel's cell, pass 1 and 2 slice by slice, pass 3 sixteen columns at a time. `measure`:
 /// BandMeasure's fields (what the cells measure). False when interrupted.
 template <class C, class T>
@@ -51,19 +103,13 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
   const bool nonzero = measure.seeds_nonzero;
   GridCells<C>& D = *out;
   D.resize(slice * nz);
-  constexpr int kColumns = 16;  // passes 2 and 3 work on this many neighbouring columns at once
   // Whole lines: their ends are the grid's faces.
   const KnownLabels whole_x = KnownLabels::wholeLine(0, measure.black_border),
                     whole_y = KnownLabels::wholeLine(1, measure.black_border),
                     whole_z = KnownLabels::wholeLine(2, measure.black_border);
   // Passes 1 and 2, slice by slice: rows along x, then columns along y inside the (cache-resident) slice.
   tbb::parallel_for(tbb::blocked_range<int>(0, nz), [&](const tbb::blocked_range<int>& r) {
-    const size_t n = size_t(std::max(nx, ny));
-    std::vector<C> cols(kColumns * size_t(ny)), res(n);
-    std::vector<T> col_labels(multi ? kColumns * size_t(ny) : 0);
-    std::vector<int> v(n);
-    std::vector<double> zz(2 * n + 2);
-    LabelLineScratch<C> runs{int(n)};
+    ColumnScratch<C, T> scratch(std::max(nx, ny), multi);
     for (int z = r.begin(); z != r.end(); ++z) {
       if (isInterrupted(interrupter)) return;
       C* s = D.data() + size_t(z) * slice;
@@ -71,7 +117,7 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
       for (int y = 0; y < ny; ++y) {
         const T* row = m + size_t(y) * nx;
         if (multi)
-          otherLabelLine<C, T>(row, nx, whole_x, nullptr, s + size_t(y) * nx, w2[0], runs);
+          otherLabelLine<C, T>(row, nx, whole_x, nullptr, s + size_t(y) * nx, w2[0], scratch.runs);
         else {
           C* out = s + size_t(y) * nx;
           seedLine<C>(
@@ -79,71 +125,21 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
               [&](int i) -> const C& { return out[i]; }, [&](int i, const C& c) { out[i] = c; });
         }
       }
-      // Columns along y, kColumns neighbours at a time: each y reads and writes whole cache lines (one column at a
-      // time, the strided copies in and out were a third of passes 1 and 2).
-      for (int x0 = 0; x0 < nx; x0 += kColumns) {
-        const int w = std::min(kColumns, nx - x0);
-        for (int y = 0; y < ny; ++y) {
-          const C* row = s + size_t(y) * nx + x0;
-          for (int i = 0; i < w; ++i) cols[size_t(i) * ny + y] = row[i];
-          if (multi) {
-            const T* label_row = m + size_t(y) * nx + x0;
-            for (int i = 0; i < w; ++i) col_labels[size_t(i) * ny + y] = label_row[i];
-          }
-        }
-        for (int i = 0; i < w; ++i) {
-          C* col = cols.data() + size_t(i) * ny;
-          if (multi) {
-            otherLabelLine<C, T>(col_labels.data() + size_t(i) * ny, ny, whole_y, col, col, w2[1], runs);
-          } else {
-            parabolaEnvelope(col, res.data(), ny, w2[1], v.data(), zz.data());
-            std::copy(res.begin(), res.begin() + ny, col);
-          }
-        }
-        for (int y = 0; y < ny; ++y) {
-          C* row = s + size_t(y) * nx + x0;
-          for (int i = 0; i < w; ++i) row[i] = cols[size_t(i) * ny + y];
-        }
-      }
+      for (int x0 = 0; x0 < nx; x0 += kColumns)
+        columnPass(s + x0, multi ? m + x0 : nullptr, size_t(nx), ny, std::min(kColumns, nx - x0), whole_y, w2[1], false,
+                   scratch);
     }
   });
   if (isInterrupted(interrupter)) return false;
-  // Pass 3, along z: kColumns neighbouring columns at a time, so each z reads whole cache lines.
+  // Pass 3, along z, its lines a slice apart (prefetched).
   tbb::parallel_for(tbb::blocked_range<int>(0, ny), [&](const tbb::blocked_range<int>& r) {
-    const size_t n = static_cast<size_t>(nz);
-    std::vector<C> cols(kColumns * n), res(n);
-    std::vector<T> col_labels(multi ? kColumns * n : 0);
-    std::vector<int> v(n);
-    std::vector<double> zz(2 * n + 2);
-    LabelLineScratch<C> runs{int(n)};
+    ColumnScratch<C, T> scratch(nz, multi);
     for (int y = r.begin(); y != r.end(); ++y) {
       if (isInterrupted(interrupter)) return;
       for (int x0 = 0; x0 < nx; x0 += kColumns) {
-        const int w = std::min(kColumns, nx - x0);
-        for (int z = 0; z < nz; ++z) {
-          const size_t at = size_t(z) * slice + size_t(y) * nx + x0;
-          const C* row = D.data() + at;
-          if (z + 8 < nz) {  // the next slices' lines: a slice apart, no hardware prefetcher follows them
-            __builtin_prefetch(row + 8 * slice);
-            if (multi) __builtin_prefetch(labels + at + 8 * slice);
-          }
-          for (int i = 0; i < w; ++i) cols[size_t(i) * nz + z] = row[i];
-          if (multi)
-            for (int i = 0; i < w; ++i) col_labels[size_t(i) * nz + z] = labels[at + i];
-        }
-        for (int i = 0; i < w; ++i) {
-          C* col = cols.data() + size_t(i) * nz;
-          if (multi)
-            otherLabelLine<C, T>(col_labels.data() + size_t(i) * nz, nz, whole_z, col, col, w2[2], runs);
-          else {
-            parabolaEnvelope(col, res.data(), nz, w2[2], v.data(), zz.data());
-            std::copy(res.begin(), res.end(), col);
-          }
-        }
-        for (int z = 0; z < nz; ++z) {
-          C* row = D.data() + size_t(z) * slice + size_t(y) * nx + x0;
-          for (int i = 0; i < w; ++i) row[i] = cols[size_t(i) * nz + z];
-        }
+        const size_t at = size_t(y) * nx + x0;
+        columnPass(D.data() + at, multi ? labels + at : nullptr, slice, nz, std::min(kColumns, nx - x0), whole_z, w2[2],
+                   true, scratch);
       }
     }
   });
