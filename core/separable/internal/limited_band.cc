@@ -23,6 +23,7 @@ namespace {
 
 constexpr int kStride[3] = {64, 8, 1};  // brickOffset's step along x, y, z
 constexpr int kWindowReach = 16;        // see cellsWithin
+constexpr int kMultiLabelWindowReach = 2;  // see cellsWithin
 
 bool hasZeroByte(uint64_t w) { return ((w - 0x0101010101010101ull) & ~w & 0x8080808080808080ull) != 0; }
 
@@ -171,6 +172,11 @@ struct LineScratch {
   std::vector<int> v;
   std::vector<double> z;
   std::vector<std::array<C, kBrickSize>> lanes;
+  // Multi-label window: a run's labels, its 8 x 8 lines at each position (gathered once per run: a line along y or z
+  // reads a cache line per voxel), and one bundle's eight lines.
+  std::vector<T> block;
+  std::vector<std::array<T, kBrickSize>> label_lanes;
+  std::vector<std::array<C, kBrickSize>> run_lo, run_hi;
   LineScratch(int n, int reach)
       : f(size_t(n)),
         d(size_t(n)),
@@ -272,6 +278,23 @@ BrickClasses classifyBricks(const Grid& grid, const T* labels, bool multi_label,
                 all[size_t(bx)] &= !hasZeroByte(word);
               }
           }
+          if (multi_label)  // most brick rows hold one label: compare them whole, classify the rest voxel by voxel
+            for (; (bx + 1) * kBrickSize <= dims.x; ++bx) {
+              const T* v = row + bx * kBrickSize;
+              const T f = first[size_t(bx)];
+              bool one = true;
+              for (int k = 0; k < kBrickSize; ++k) one &= v[k] == f;
+              if (one) {
+                any[size_t(bx)] |= f != 0;
+                all[size_t(bx)] &= f != 0;
+                continue;
+              }
+              same[size_t(bx)] = 0;
+              for (int k = 0; k < kBrickSize; ++k) {
+                any[size_t(bx)] |= v[k] != 0;
+                all[size_t(bx)] &= v[k] != 0;
+              }
+            }
           for (int x = bx * kBrickSize; x < dims.x; ++x) {
             const size_t b = size_t(x >> kBrickLog2);
             any[b] |= row[x] != 0;
@@ -419,16 +442,122 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
     runs = buildRuns(bricks, axis, reach_bricks[axis], bd, pool);
     const int o1 = axis == 2 ? 1 : 2;  // the second other axis: the lanes of a bundle
     const int reach = reach_voxels[axis];
-    // The window minimum takes 2 reach + 1 candidates a voxel, eight lines at once: cheaper than the envelope's
-    // per-voxel bookkeeping up to ~16 voxels.
-    const bool window = !multi && reach <= kWindowReach;
     const double wa = w2[axis];
+    // A multi-label run's labels, read once for its 8 x 8 lines (a line along y or z alone reads a cache line per
+    // voxel): block[(i + reach) * 64 + w * 8 + u] is the label of line (u, w) at position i of the run, for i in
+    // [-known.before, length + known.after). Called for u = 0, before the run's lines.
+    auto gatherRunLabels = [&](const Runs::Run& run, const KnownLabels& known, int w_end, int length,
+                               LineScratch<C, T>& s) {
+      const int start = run.lo * kBrickSize;
+      const int x0 = run.other[0] * kBrickSize;  // x: the first other axis of both passes
+      const int u_end = std::min(kBrickSize, dims.x - x0);
+      s.block.resize((size_t(length) + 2 * size_t(reach)) * kBrickSize * kBrickSize);
+      const int64_t step = axis == 1 ? int64_t(dims.x) : int64_t(dims.x) * dims.y;
+      const int64_t w_step = axis == 1 ? int64_t(dims.x) * dims.y : int64_t(dims.x);
+      const T* corner = labels + x0 + int64_t(run.other[1]) * kBrickSize * w_step;
+      for (int i = -known.before; i < length + known.after; ++i) {
+        const T* p = corner + int64_t(start + i) * step;
+        T* to = s.block.data() + size_t(i + reach) * kBrickSize * kBrickSize;
+        for (int w = 0; w < w_end; ++w)
+          if (u_end == kBrickSize)  // a constant size: no call
+            std::memcpy(to + w * kBrickSize, p + w * w_step, kBrickSize * sizeof(T));
+          else
+            std::memcpy(to + w * kBrickSize, p + w * w_step, size_t(u_end) * sizeof(T));
+      }
+    };
+    // A step of k voxels (k <= reach): with float cells the window adds in float, which equals the envelope's sum
+    // in double rounded once when every step is a float and no two values differ by more than 2^28 (a sum of two
+    // floats is then exact in double); otherwise the envelope runs.
+    using Dist = typename Ops::Dist;
+    std::array<Dist, kMultiLabelWindowReach + 1> steps{};
+    bool float_sums_exact = true;
+    for (int k = 1; k <= std::min(reach, kMultiLabelWindowReach); ++k) {
+      steps[size_t(k)] = Ops::step(wa, k);
+      float_sums_exact &= double(steps[size_t(k)]) == wa * k * k;
+    }
+    float_sums_exact &= double(cut2) < std::ldexp(std::min({w2[0], w2[1], w2[2]}), 28);
+    // The window minimum takes 2 reach + 1 candidates a voxel, eight lines at once: cheaper than the envelope's
+    // per-voxel bookkeeping up to ~16 voxels (multi-label: up to 2, each candidate also checks the label run).
+    const bool window = multi ? reach <= kMultiLabelWindowReach && (std::is_integral_v<Dist> || float_sums_exact)
+                              : reach <= kWindowReach;
+    // The multi-label pass as a window minimum over eight lines (the bundle of local coordinate u): a voxel of label
+    // L takes f + w2 k^2 from the voxels k <= reach away while its label run goes on, and w2 k^2 from the first voxel
+    // of another label (a run end: distance 0), as the envelope over the run and its ends would (otherLabelLine).
+    // Beyond the grid's face the outside is label 0 with the black border there, else the line's edge label with
+    // nothing measured (no run end). Label-0 voxels get far (the caller's 0).
+    // Generic (`s` and `at`), so that cells with labels (which never take this path) do not instantiate it. Only up
+    // to a reach of 2: its candidates cost more than the envelope beyond (pass 2 of 100 labels at a reach of 5).
+    auto multiLabelWindow = [&](const Runs::Run& run, int u, int w_end, int length, auto& s, const auto& at) {
+      using V = typename std::remove_cvref_t<decltype(s.lanes)>::value_type::value_type;  // C
+      const int start = run.lo * kBrickSize;
+      const KnownLabels known = knownLabels(axis, start, length);
+      const size_t span = size_t(length) + 2 * size_t(reach);
+      if (u == 0) gatherRunLabels(run, known, w_end, length, s);
+      s.label_lanes.resize(span);
+      auto* lab = s.label_lanes.data() + reach;
+      auto* lane = s.lanes.data() + reach;
+      for (int i = -known.before; i < length + known.after; ++i) {
+        const T* from = s.block.data() + size_t(i + reach) * kBrickSize * kBrickSize + u;
+        for (int w = 0; w < kBrickSize; ++w) lab[i][size_t(w)] = w < w_end ? from[w * kBrickSize] : T(0);
+      }
+      // Outside the grid (within the reach): label 0 behind a black border, else the edge's label (the run goes on).
+      const bool border_before = known.face_before && known.border_before,
+                 border_after = known.face_after && known.border_after;
+      for (int i = -reach; i < -known.before; ++i)
+        for (int w = 0; w < kBrickSize; ++w) lab[i][size_t(w)] = border_before ? T(0) : lab[-known.before][size_t(w)];
+      for (int i = length + known.after; i < length + reach; ++i)
+        for (int w = 0; w < kBrickSize; ++w)
+          lab[i][size_t(w)] = border_after ? T(0) : lab[length + known.after - 1][size_t(w)];
+      const V far = windowFar<V>();
+      for (int i = -reach; i < length + reach; ++i) lane[i].fill(far);
+      for (int i = 0; i < length; ++i)
+        for (int w = 0; w < w_end; ++w) {
+          const C f = at(i, w);
+          if (!Ops::isFar(f)) lane[i][size_t(w)] = f;
+        }
+      // How far each voxel's label run goes on below and above, capped at the reach: a run end within the reach is
+      // the first voxel of another label, one step past it.
+      s.run_lo.resize(span);
+      s.run_hi.resize(span);
+      auto* lo = s.run_lo.data() + reach;
+      auto* hi = s.run_hi.data() + reach;
+      const V cap = V(reach);
+      lo[-reach].fill(cap);
+      for (int i = -reach + 1; i < length; ++i)
+        for (size_t w = 0; w < kBrickSize; ++w)
+          lo[i][w] = lab[i - 1][w] == lab[i][w] ? std::min(V(lo[i - 1][w] + V(1)), cap) : V(0);
+      hi[length + reach - 1].fill(cap);
+      for (int i = length + reach - 2; i >= 0; --i)
+        for (size_t w = 0; w < kBrickSize; ++w)
+          hi[i][w] = lab[i + 1][w] == lab[i][w] ? std::min(V(hi[i + 1][w] + V(1)), cap) : V(0);
+      for (int i = 0; i < length; ++i) {
+        std::array<V, kBrickSize> m = lane[i];
+        for (int k = 1; k <= reach; ++k) {
+          const V kc = V(k), end = steps[size_t(k)];
+          const auto& flo = lane[i - k];
+          const auto& fhi = lane[i + k];
+          for (size_t w = 0; w < kBrickSize; ++w) {
+            const V via_lo = kc <= lo[i][w] ? V(flo[w] + end) : kc == lo[i][w] + V(1) ? end : far;
+            const V via_hi = kc <= hi[i][w] ? V(fhi[w] + end) : kc == hi[i][w] + V(1) ? end : far;
+            m[w] = std::min(m[w], std::min(via_lo, via_hi));
+          }
+        }
+        const std::array<T, kBrickSize>& own = lab[i];
+        for (int w = 0; w < w_end; ++w) at(i, w) = own[size_t(w)] == 0 ? Ops::far() : keep(m[size_t(w)]);
+      }
+    };
     const bool ok = forEachLines<C, T>(
         runs, axis, dims, reach, pool, arena, interrupter,
         [&](size_t ri, int u, int base, int w_end, int length, C* const* values, LineScratch<C, T>& s) {
           auto at = [&](int i, int w) -> C& {
             return values[i / kBrickSize][base + w * kStride[o1] + (i % kBrickSize) * kStride[axis]];
           };
+          if constexpr (!Ops::kTagged) {  // nearest labels are the seed field's only
+            if (window && multi) {
+              multiLabelWindow(runs.runs[ri], u, w_end, length, s, at);
+              return;
+            }
+          }
           if (window) {
             // Eight lines at once, side by side, padded by `reach` far rows at each end.
             auto* lane = s.lanes.data() + reach;
@@ -463,6 +592,7 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
           const Runs::Run& run = runs.runs[ri];
           const int start = run.lo * kBrickSize;
           const KnownLabels known = multi ? knownLabels(axis, start, length) : KnownLabels{};
+          if (multi && u == 0) gatherRunLabels(run, known, w_end, length, s);
           for (int w = 0; w < w_end; ++w) {
             bool any = false;
             for (int i = 0; i < length; ++i) {
@@ -471,15 +601,10 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
             }
             if (!any && !multi) continue;  // multi-label: the run ends along this line count without any value
             if (multi) {
-              // The line's labels, `known` beyond its ends: a gather along y or z.
-              int c[3];
-              c[0] = run.other[0] * kBrickSize + u;  // x: the first other axis of both passes
-              c[o1] = run.other[1] * kBrickSize + w;
-              const int64_t step = axis == 1 ? int64_t(dims.x) : int64_t(dims.x) * dims.y;
-              c[axis] = start - known.before;
-              const T* p = labels + (int64_t(c[2]) * dims.y + c[1]) * dims.x + c[0];
+              // The line's labels, `known` beyond its ends, from the run's block.
+              const T* p = s.block.data() + size_t(reach - known.before) * kBrickSize * kBrickSize + w * kBrickSize + u;
               const int total = known.before + length + known.after;
-              for (int i = 0; i < total; ++i) s.labels[size_t(i)] = p[i * step];
+              for (int i = 0; i < total; ++i) s.labels[size_t(i)] = p[size_t(i) * kBrickSize * kBrickSize];
               otherLabelLine<C, T>(s.labels.data() + known.before, length, known, s.f.data(), s.d.data(), wa, s.runs);
             } else {
               parabolaEnvelope(s.f.data(), s.d.data(), length, wa, s.v.data(), s.z.data());

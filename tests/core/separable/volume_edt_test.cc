@@ -338,7 +338,7 @@ TEST(SeparableEdtTest, MultiLabelEdtMatchesBruteForce) {
     for (const auto& [name, labels] : volumes)
       for (bool black : {false, true}) {
         const std::vector<double> exact = oracle::otherLabelDistance(d.x, d.y, d.z, labels, spacingOf(grid), black);
-        for (double limit : {std::numeric_limits<double>::infinity(), 1.7, 3.1}) {
+        for (double limit : {std::numeric_limits<double>::infinity(), 1.7, 2.2, 3.1}) {
           BandOptions o;
           o.limit_world = limit;
           o.segment_length_world = limit > 3 ? 0.0 : 0.6;
