@@ -6,7 +6,8 @@
 // against the rest, which would flip its signs) is re-oriented consistently and outward (positive signed volume);
 // consistent components are never touched, so a wholly inward mesh stays inward, and a non-orientable component is
 // left as it is. MeshReport says what was found, including what was dropped and re-oriented, and how many connected
-// parts the mesh has and whether their bounding boxes overlap (parts that may cross or nest). Errors are a Status
+// parts the mesh has and whether their bounding boxes overlap (closed parts that cross or nest: the automatic sign
+// then takes the winding number, core/seeds/mesh_sign.h). Errors are a Status
 // (kInvalidArgument for malformed input, kNotFound for a missing file, kIoError for a file that cannot be read, the
 // interrupter's status when it stopped the work) whose message names the file and the problem; malformed input never
 // asserts or crashes. Plain value types; not synchronised.
