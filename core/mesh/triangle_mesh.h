@@ -3,7 +3,8 @@
 // index is < vertices.size(), no triangle has zero area, and vertices that share an exact position are welded
 // (so edges shared by triangles from different file groups are recognised as shared). A closed (edge-manifold)
 // component whose faces disagree on orientation (two faces running a shared edge the same way: a patch flipped
-// against the rest, which would flip its signs) is re-oriented consistently and outward (positive signed volume);
+// against the rest, which would flip its signs) is re-oriented consistently and outward (positive signed volume),
+// each component on its own (so an inward inner shell of a hollow part that has a flipped patch comes out outward);
 // consistent components are never touched, so a wholly inward mesh stays inward, and a non-orientable component is
 // left as it is. MeshReport says what was found, including what was dropped and re-oriented, and how many connected
 // parts the mesh has and whether their bounding boxes overlap (closed parts that cross or nest: the automatic sign
