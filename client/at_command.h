@@ -9,7 +9,7 @@
 //   * The seeds, --sign, --limit, --deadline and a volume's lattice are the field flags of compute and query,
 //     registered by the same functions (client/field_flags.h: addPointQueryFlags); core's point planner
 //     (core/points/point_plan.h) decides what they leave open, as for grids (auto sign: pseudonormal for a closed mesh,
-//     winding for an open one).
+//     winding for an open one or one whose closed parts overlap).
 //   * Every flag and output path is checked before any file is read; then the query points are read a chunk at a
 //     time (--chunk-points, default and at most kMaxChunkPoints), so memory stays bounded whatever the file's size.
 //     The results are written in the query file's order (client/point_outputs.h), values in its type (float32 for a

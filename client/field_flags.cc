@@ -68,7 +68,8 @@ std::string signHelp() {
   for (SignMethod m : kSignMethods)
     if (m != SignMethod::kAuto && m != SignMethod::kUnsigned) methods.push_back(m);
   return fmt::format(
-      "{} (default: meshes {} when closed, {} when open; points and volumes unsigned) | {} (meshes) | "
+      "{} (default: meshes {} when closed, {} when open or when closed parts overlap; points and volumes "
+      "unsigned) | {} (meshes) | "
       "{} | {} (volumes: negative inside the mask)",
       signMethodName(SignMethod::kAuto), signMethodName(SignMethod::kPseudonormal),
       signMethodName(SignMethod::kWinding), joinNames(methods, signMethodName, " | "),

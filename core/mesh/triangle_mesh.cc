@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <numeric>
 
 #include <fmt/format.h>
@@ -112,13 +113,93 @@ int64_t repairOrientation(TriangleMesh* mesh, const Interrupter* interrupter) {
   return flipped;
 }
 
+// The mesh's connected parts (findMeshParts) and whether the bounding boxes of some two parts intersect (touching
+// counts): a sweep along the longest axis of the whole box that stops at the first such pair. Every vertex must be
+// referenced. Returns false when interrupted. Memory: 4 bytes a vertex and 52 a part (at most 17 a vertex: a part
+// has 3 vertices or more).
+bool findComponents(const TriangleMesh& mesh, const Interrupter* interrupter, int64_t* components, bool* overlap) {
+  const size_t nv = mesh.vertices.size();
+  std::vector<uint32_t> part;
+  const int64_t count = findMeshParts(nv, mesh.triangles, &part, interrupter);
+  if (count < 0) return false;
+  *components = count;
+  *overlap = false;
+  if (count < 2) return true;
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  std::vector<std::array<Vec3d, 2>> box(count, {Vec3d{inf, inf, inf}, Vec3d{-inf, -inf, -inf}});
+  Vec3d lo = mesh.vertices[0], hi = lo;
+  for (uint32_t v = 0; v < nv; ++v) {
+    const Vec3d& p = mesh.vertices[v];
+    auto& b = box[part[v]];
+    b[0] = {std::min(b[0].x, p.x), std::min(b[0].y, p.y), std::min(b[0].z, p.z)};
+    b[1] = {std::max(b[1].x, p.x), std::max(b[1].y, p.y), std::max(b[1].z, p.z)};
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+  }
+  std::vector<uint32_t>().swap(part);
+  const Vec3d extent = hi - lo;
+  const int axis = extent.x >= extent.y && extent.x >= extent.z ? 0 : extent.y >= extent.z ? 1 : 2;
+  auto along = [axis](const Vec3d& p) { return axis == 0 ? p.x : axis == 1 ? p.y : p.z; };
+  std::vector<uint32_t> order(count);
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return along(box[a][0]) < along(box[b][0]); });
+  std::vector<uint32_t> active;  // parts whose extent along the axis reaches the current one's start
+  size_t polled = 0;
+  for (uint32_t c : order) {
+    const auto& b = box[c];
+    std::erase_if(active, [&](uint32_t a) { return along(box[a][1]) < along(b[0]); });
+    for (uint32_t a : active) {
+      const auto& o = box[a];
+      if (o[0].x <= b[1].x && b[0].x <= o[1].x && o[0].y <= b[1].y && b[0].y <= o[1].y && o[0].z <= b[1].z &&
+          b[0].z <= o[1].z) {
+        *overlap = true;
+        return true;
+      }
+    }
+    polled += active.size() + 1;
+    if (polled >= 65536) {
+      polled = 0;
+      if (isInterrupted(interrupter)) return false;
+    }
+    active.push_back(c);
+  }
+  return true;
+}
+
 }  // namespace
 
+int64_t findMeshParts(size_t vertex_count, const std::vector<std::array<uint32_t, 3>>& triangles,
+                      std::vector<uint32_t>* part_out, const Interrupter* interrupter) {
+  std::vector<uint32_t>& part = *part_out;  // union-find parents first, then each vertex's part
+  part.resize(vertex_count);
+  std::iota(part.begin(), part.end(), 0u);
+  auto root = [&](uint32_t v) {
+    while (part[v] != v) v = part[v] = part[part[v]];  // path halving
+    return v;
+  };
+  size_t polled = 0;
+  for (const auto& t : triangles) {
+    if (++polled % 65536 == 0 && isInterrupted(interrupter)) return -1;
+    for (int k = 1; k < 3; ++k) {
+      const uint32_t a = root(t[0]), b = root(t[k]);
+      if (a != b) part[std::max(a, b)] = std::min(a, b);  // a part's root is its lowest vertex
+    }
+  }
+  // In ascending order every vertex's root is already final; then roots get ids in order and the rest their root's.
+  for (size_t v = 0; v < vertex_count; ++v) part[v] = part[part[v]];
+  uint32_t count = 0;
+  for (size_t v = 0; v < vertex_count; ++v) part[v] = part[v] == v ? count++ : part[part[v]];
+  return count;
+}
+
 std::string MeshReport::summary() const {
-  return fmt::format("{} vertices, {} triangles, {} degenerate skipped, {} boundary edges, {} non-manifold edges{}{}",
-                     vertices, triangles, degenerate, boundary_edges, non_manifold_edges,
-                     non_triangles ? fmt::format(", {} point/line primitives skipped", non_triangles) : "",
-                     reoriented_faces ? fmt::format(", {} faces re-oriented", reoriented_faces) : "");
+  return fmt::format(
+      "{} vertices, {} triangles, {} degenerate skipped, {} boundary edges, {} non-manifold edges{}{}{}", vertices,
+      triangles, degenerate, boundary_edges, non_manifold_edges,
+      non_triangles ? fmt::format(", {} point/line primitives skipped", non_triangles) : "",
+      reoriented_faces ? fmt::format(", {} faces re-oriented", reoriented_faces) : "",
+      components > 1 ? fmt::format(", {} parts{}", components, components_overlap ? " (bounding boxes overlap)" : "")
+                     : "");
 }
 
 Status validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* interrupter) {
@@ -223,6 +304,7 @@ Status validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* i
     r.reoriented_faces = repairOrientation(mesh, interrupter);
     if (r.reoriented_faces < 0) return interruptedStatus(interrupter);
   }
+  if (!findComponents(*mesh, interrupter, &r.components, &r.components_overlap)) return interruptedStatus(interrupter);
   if (report) {
     r.non_triangles = report->non_triangles;
     *report = r;

@@ -3,9 +3,12 @@
 // index is < vertices.size(), no triangle has zero area, and vertices that share an exact position are welded
 // (so edges shared by triangles from different file groups are recognised as shared). A closed (edge-manifold)
 // component whose faces disagree on orientation (two faces running a shared edge the same way: a patch flipped
-// against the rest, which would flip its signs) is re-oriented consistently and outward (positive signed volume);
+// against the rest, which would flip its signs) is re-oriented consistently and outward (positive signed volume),
+// each component on its own (so an inward inner shell of a hollow part that has a flipped patch comes out outward);
 // consistent components are never touched, so a wholly inward mesh stays inward, and a non-orientable component is
-// left as it is. MeshReport says what was found, including what was dropped and re-oriented. Errors are a Status
+// left as it is. MeshReport says what was found, including what was dropped and re-oriented, and how many connected
+// parts the mesh has and whether their bounding boxes overlap (closed parts that cross or nest: the automatic sign
+// then takes the winding number, core/seeds/mesh_sign.h). Errors are a Status
 // (kInvalidArgument for malformed input, kNotFound for a missing file, kIoError for a file that cannot be read, the
 // interrupter's status when it stopped the work) whose message names the file and the problem; malformed input never
 // asserts or crashes. Plain value types; not synchronised.
@@ -35,11 +38,19 @@ struct MeshReport {
   int64_t boundary_edges = 0;      ///< edges used by exactly one kept triangle (0 for a closed mesh)
   int64_t non_manifold_edges = 0;  ///< edges used by more than two kept triangles
   int64_t reoriented_faces = 0;    ///< faces flipped to make closed components consistent and outward
+  int64_t components = 0;          ///< connected parts (triangles sharing a vertex are connected)
+  bool components_overlap = false;  ///< the bounding boxes of some two parts intersect (touching counts)
   Vec3d bbox_min, bbox_max;        ///< world bounding box of the kept triangles' vertices
 
   bool closed() const { return boundary_edges == 0 && non_manifold_edges == 0; }
   std::string summary() const;     ///< one line for logs and the CLI
 };
+
+/// The connected parts of triangles over `vertex_count` vertices (triangles sharing a vertex are connected): sets
+/// (*part)[v] to vertex v's part, parts numbered in the order of their lowest vertex (a vertex no triangle uses is a
+/// part of its own), and returns the number of parts, or -1 when `interrupter` stopped it. Memory: `part` alone.
+int64_t findMeshParts(size_t vertex_count, const std::vector<std::array<uint32_t, 3>>& triangles,
+                      std::vector<uint32_t>* part, const Interrupter* interrupter = nullptr);
 
 /// The largest mesh file loadMesh reads (a local file: the CLI, benches and tests; the server never reads files).
 inline constexpr uint64_t kMaxMeshFileBytes = uint64_t(4) << 30;
@@ -51,9 +62,10 @@ Status loadMesh(const std::string& path, TriangleMesh* mesh, MeshReport* report)
 
 /// Validates an in-memory mesh in place: rejects an empty mesh, non-finite coordinates and out-of-range
 /// indices; welds identical positions, drops degenerate triangles and unreferenced vertices, re-orients closed
-/// components whose faces disagree (see the contract above), and fills `report` (may be null). On error the mesh
-/// is unspecified (the interrupter's status when it stopped the work). Memory: ~40 bytes per vertex and 24 per
-/// triangle beyond the mesh itself (the re-orientation, when needed, stays within that).
+/// components whose faces disagree (see the contract above), finds the connected parts and whether their bounding
+/// boxes overlap, and fills `report` (may be null). On error the mesh is unspecified (the interrupter's status when
+/// it stopped the work). Memory: ~40 bytes per vertex and 24 per triangle beyond the mesh itself (the
+/// re-orientation, when needed, and the parts' boxes stay within that).
 Status validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* interrupter = nullptr);
 
 }  // namespace distband

@@ -3,9 +3,9 @@
 // Contract:
 //   * planPoints() turns a FieldRequest (the same request type the grid path plans: seeds, sign, limit; its grid,
 //     stencil, mode, segment and algorithm fields do not apply and must be unset) into a PointPlan: the sign by
-//     planSign (the grid path's rule: auto = pseudonormal for a closed mesh, winding for an open one), the limit in
-//     world units (limit_voxels reads the volume's lattice, the only grid a point query has), and the sign of the
-//     points beyond the limit (farSign). kInvalidArgument naming the field otherwise.
+//     planSign (the grid path's rule: auto = pseudonormal for a closed mesh whose parts do not overlap, winding
+//     otherwise), the limit in world units (limit_voxels reads the volume's lattice, the only grid a point query has),
+//     and the sign of the points beyond the limit (farSign). kInvalidArgument naming the field otherwise.
 //   * completePointSearch() builds every part of a PointSearch the plan needs and `search` lacks: a caller that keeps
 //     parts (the server's asset cache) fills them in first and keeps what was built; the parts are immutable and
 //     shared. Meshes: a TriangleBvh, a MeshSign of the plan's method in world space, a winding-number MeshSign for

@@ -43,9 +43,17 @@ SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std
     if (reason) *reason = "requested";
     return requested;
   }
-  if (report.closed()) {
+  // Closed parts that cross or nest break the pseudonormal test (a point inside one part whose closest triangle is
+  // another's takes that triangle's side); disjoint bounding boxes rule both out, cheaply.
+  if (report.closed() && !report.components_overlap) {
     if (reason) *reason = "auto: the mesh is closed";
     return SignMethod::kPseudonormal;
+  }
+  if (report.closed()) {
+    if (reason)
+      *reason = fmt::format("auto: the mesh is closed but its parts overlap ({} parts, bounding boxes intersect)",
+                            report.components);
+    return SignMethod::kWinding;
   }
   if (reason) {
     std::string edges;
@@ -170,6 +178,9 @@ struct MeshSign::Tables {
   /// a boundary or non-manifold edge (capped at kFarFromBoundary), the curves the winding number turns around without
   /// crossing the surface.
   std::vector<float> boundary_distance;
+  /// Winding: each triangle's connected part (findMeshParts), empty when the mesh is one part. Parts may cross or nest,
+  /// so the certificate takes a brick only when all its voxels' closest triangles belong to one part.
+  std::vector<uint32_t> part;
 
   /// `dist` is p's distance to triangle t, known to float precision.
   bool insidePseudonormal(const Vec3d& p, uint32_t t, double dist) const {
@@ -350,7 +361,10 @@ void MeshSign::Tables::buildBoundaryDistances() {
 // centre fixes w0: if w0 lies well inside (-1/2, 1/2), every voxel in front is outside and every voxel behind is
 // inside, the pseudonormal's answer. Otherwise (near holes, thin or self-intersecting parts, w0 near 1/2) the brick
 // takes a winding query per voxel. The margins cover the turn of the winding number around the boundary curves
-// across the brick and the hierarchy's error.
+// across the brick and the hierarchy's error. Sheets of two connected parts in one brick (parts that cross, or nest
+// with the same orientation: a voxel in front of one sheet can lie behind the other, which no single w0 describes)
+// also send the brick to the per-voxel queries. Not covered: one connected part that crosses itself, or stacks two
+// sheets of the same orientation, within a brick.
 bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle,
                                             double voxel_size, const Vec3d& scale) const {
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
@@ -359,6 +373,7 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites,
     return Vec3d{c.x * scale.x, c.y * scale.y, c.z * scale.z};
   };
   int ref = -1, n = 0;
+  uint32_t brick_part = 0;
   double ref_to_center = std::numeric_limits<double>::infinity(), boundary = kFarFromBoundary;
   Vec3d normal{};
   const Vec3d center{(brick.origin.x + 3.5) * scale.x, (brick.origin.y + 3.5) * scale.y, (brick.origin.z + 3.5) * scale.z};
@@ -368,8 +383,9 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites,
       if (sites[i] == kNoSite) return false;
       const uint32_t t = triangleOf(sites[i]);
       const Vec3d tn{face_n[t].x, face_n[t].y, face_n[t].z};
-      if (n++ == 0) normal = tn;
-      if (normal.dot(tn) <= 0) return false;  // thin parts: opposite sheets in one brick
+      if (n++ == 0) normal = tn, brick_part = part.empty() ? 0 : part[t];
+      if (normal.dot(tn) <= 0) return false;                     // thin parts: opposite sheets in one brick
+      if (!part.empty() && part[t] != brick_part) return false;  // sheets of two parts
       boundary = std::min(boundary, boundary_distance[t] - std::abs(brick.values[i]) / voxel_size);
       const double c2 = (at(i) - center).lengthSqr();
       if (c2 < ref_to_center) ref_to_center = c2, ref = i;
@@ -421,7 +437,15 @@ Status MeshSign::build(std::vector<Vec3d> vertices, const std::vector<std::array
         for (int k = 0; k < 3; ++k) tris[t][k] = vertices[triangles[t][k]];
     });
     if (method == SignMethod::kWinding) {
-      tables.winding = std::make_unique<WindingNumber>(std::move(tris), 2.0, interrupter);
+      // Each triangle's part, for the certificate, when there are several.
+      std::vector<uint32_t> vertex_part;
+      if (findMeshParts(vertices.size(), triangles, &vertex_part, interrupter) > 1) {
+        tables.part.resize(triangles.size());
+        for (size_t t = 0; t < triangles.size(); ++t) tables.part[t] = vertex_part[triangles[t][0]];
+      }
+      std::vector<uint32_t>().swap(vertex_part);
+      if (!isInterrupted(interrupter))
+        tables.winding = std::make_unique<WindingNumber>(std::move(tris), 2.0, interrupter);
       // The certificate that signs most bricks with one query (signWindingCertified) reads pseudonormals, and each
       // triangle's distance from the boundary, built in the grid's frame on the first signed brick.
       tables.verts = std::move(vertices);
@@ -553,7 +577,7 @@ uint64_t MeshSign::memoryBytes() const {
   uint64_t bytes = sizeof(MeshSign) + sizeof(Tables) + t.verts.capacity() * sizeof(Vec3d) +
                    t.corners.capacity() * sizeof(t.corners[0]) +
                    (t.face_n.capacity() + t.edge_n.capacity() + t.vertex_n.capacity()) * sizeof(Normal3f) +
-                   t.boundary_distance.capacity() * sizeof(float);
+                   t.boundary_distance.capacity() * sizeof(float) + t.part.capacity() * sizeof(uint32_t);
   if (t.winding) bytes += t.winding->memoryBytes();
   if (t.parity) bytes += estimateBytes(SignMethod::kParity, 0, t.triangles);
   return bytes;
@@ -567,8 +591,9 @@ uint64_t MeshSign::estimateBytes(SignMethod method, uint64_t vertices, uint64_t 
              triangles * (sizeof(std::array<uint32_t, 3>) + 4 * sizeof(Normal3f) + sizeof(Vec3d) +
                           3 * sizeof(double) + 3 * 16);
     case SignMethod::kWinding:
-      // The triangles, twice while the tree is built, and about two nodes per leaf of a few triangles.
-      return triangles * (2 * sizeof(std::array<Vec3d, 3>) + 64);
+      // The triangles, twice while the tree is built, about two nodes per leaf of a few triangles, and each
+      // triangle's part.
+      return triangles * (2 * sizeof(std::array<Vec3d, 3>) + 64 + sizeof(uint32_t));
     case SignMethod::kParity:
       // Embree's float vertices, indices and BVH (a generous 3x the buffers), and the triangles it is built from.
       return triangles * (sizeof(std::array<Vec3d, 3>) + 4 * (36 + 12));

@@ -2,7 +2,7 @@
 // caller: the grid path (core/seeds/mesh_seeds.h signs each delivered brick with it) and point queries
 // (core/points/point_query.h sign each query point with it).
 // Contract:
-//   * The methods (SignMethod) and their names are defined here; kAuto is resolved on the mesh's edges by
+//   * The methods (SignMethod) and their names are defined here; kAuto is resolved on the mesh's edges and parts by
 //     resolveSignMethod before anything is built.
 //   * build() takes the mesh's vertices in the caller's frame (index space for a grid, world space for point queries)
 //     and its triangles, and builds what the method needs, polling `interrupter` (then it returns its status):
@@ -35,8 +35,8 @@
 
 namespace distband {
 
-/// kAuto (the default for meshes, decided here once): kPseudonormal for a closed mesh, kWinding for an open one;
-/// resolve it with resolveSignMethod before a sign is built.
+/// kAuto (the default for meshes, decided here once): kPseudonormal for a closed mesh whose parts do not overlap,
+/// kWinding otherwise; resolve it with resolveSignMethod before a sign is built.
 enum class SignMethod { kAuto, kPseudonormal, kWinding, kParity, kUnsigned };
 inline constexpr SignMethod kDefaultMeshSign = SignMethod::kAuto;
 /// Every method, the default first.
@@ -48,9 +48,11 @@ std::string_view signMethodName(SignMethod method);
 bool parseSignMethod(std::string_view name, SignMethod* method);
 
 /// The method `requested` stands for on a mesh with this report: kAuto becomes kPseudonormal when the mesh is
-/// closed (the pseudonormal test is exact there and the cheapest), else kWinding (the pseudonormal test gives
-/// wrong-sign patches near an open mesh's holes); other methods are returned as they are. `reason` (may be null)
-/// gets why, for users: e.g. "auto: the mesh is open (312 boundary edges)", or "requested".
+/// closed and its parts' bounding boxes are disjoint (the pseudonormal test is exact there and the cheapest), else
+/// kWinding (the pseudonormal test gives wrong-sign patches near an open mesh's holes, and wherever a point's closest
+/// triangle belongs to another part than the one it lies in: parts that cross or nest); other methods are returned
+/// as they are. `reason` (may be null) gets why, for users: e.g. "auto: the mesh is not closed (312 boundary edges)",
+/// "auto: the mesh is closed but its parts overlap (2 parts, bounding boxes intersect)", or "requested".
 SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std::string* reason);
 
 class MeshSign {

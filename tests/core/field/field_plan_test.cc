@@ -321,6 +321,15 @@ TEST(FieldDefaultsTest, AutoSignIsPseudonormalForClosedAndWindingForOpenMeshes) 
   EXPECT_NE(why.find("3 non-manifold edges"), std::string::npos);
   EXPECT_EQ(resolveSignMethod(SignMethod::kParity, open, &why), SignMethod::kParity);
   EXPECT_EQ(why, "requested");
+  // Closed parts whose bounding boxes overlap may cross or nest, where the pseudonormal test is wrong.
+  MeshReport parts;
+  parts.components = 2;
+  EXPECT_EQ(resolveSignMethod(SignMethod::kAuto, parts, &why), SignMethod::kPseudonormal);
+  EXPECT_EQ(why, "auto: the mesh is closed");
+  parts.components_overlap = true;
+  EXPECT_EQ(resolveSignMethod(SignMethod::kAuto, parts, &why), SignMethod::kWinding);
+  EXPECT_EQ(why, "auto: the mesh is closed but its parts overlap (2 parts, bounding boxes intersect)");
+  EXPECT_EQ(resolveSignMethod(SignMethod::kPseudonormal, parts, &why), SignMethod::kPseudonormal);
   SignMethod parsed;
   ASSERT_TRUE(parseSignMethod("auto", &parsed));
   EXPECT_EQ(parsed, SignMethod::kAuto);

@@ -8,6 +8,7 @@
 #include <map>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -305,6 +306,53 @@ TEST(ValidateMeshTest, OnlyTheInconsistentComponentIsReoriented) {
   const FacePositions got = facePositions(both), want = facePositions(reference);
   ASSERT_EQ(got.size(), want.size());
   for (size_t i = 0; i < got.size(); ++i) EXPECT_TRUE(samePositions(got[i], want[i])) << "face " << i;
+}
+
+// The report's parts (connected through shared vertices) and whether their bounding boxes overlap, which decides
+// the automatic sign of a closed mesh (core/seeds/mesh_sign.h): one part; parts in a row, disjoint (the sweep
+// drops each part once passed); the same row with one more part overlapping the last, or nested in the first, or
+// touching one at a face; two parts sharing only a vertex (one part).
+TEST(ValidateMeshTest, PartsAndTheirOverlapAreReported) {
+  auto join = [](TriangleMesh a, const TriangleMesh& b) {
+    const uint32_t offset = uint32_t(a.vertices.size());
+    a.vertices.insert(a.vertices.end(), b.vertices.begin(), b.vertices.end());
+    for (auto t : b.triangles) a.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+    return a;
+  };
+  auto box = [](double x, double y = 0, double size = 1) {
+    return testing::makeBoxMesh({x, y, 0}, {x + size, y + size, size});
+  };
+  auto report = [](TriangleMesh m) {
+    MeshReport r;
+    EXPECT_TRUE(IsOk(validateMesh(&m, &r)));
+    return r;
+  };
+  const MeshReport one = report(box(0));
+  EXPECT_EQ(one.components, 1);
+  EXPECT_FALSE(one.components_overlap);
+  EXPECT_EQ(one.summary().find("parts"), std::string::npos) << one.summary();
+  TriangleMesh row = box(0);
+  for (int i = 1; i < 40; ++i) row = join(row, box(2.0 * i, (i % 3) * 0.5));  // gaps of 1 along x
+  const MeshReport disjoint = report(row);
+  EXPECT_EQ(disjoint.components, 40);
+  EXPECT_FALSE(disjoint.components_overlap) << disjoint.summary();
+  EXPECT_NE(disjoint.summary().find(", 40 parts"), std::string::npos) << disjoint.summary();
+  EXPECT_EQ(disjoint.summary().find("overlap"), std::string::npos) << disjoint.summary();
+  const MeshReport crossing = report(join(row, box(78.5, 0.5)));  // into the last box (x 78..79, y 0..1)
+  EXPECT_EQ(crossing.components, 41);
+  EXPECT_TRUE(crossing.components_overlap);
+  EXPECT_NE(crossing.summary().find(", 41 parts (bounding boxes overlap)"), std::string::npos) << crossing.summary();
+  EXPECT_TRUE(report(join(row, box(0.25, 0.25, 0.5))).components_overlap);  // nested in the first
+  EXPECT_TRUE(report(join(row, box(-1, 0.5))).components_overlap);          // touching the first at x = 0
+  EXPECT_FALSE(report(join(row, box(-1.5, 0.5))).components_overlap);
+  // Two boxes sharing one corner are one part (triangles sharing a vertex are connected).
+  const MeshReport corner = report(join(box(0), testing::makeBoxMesh({1, 1, 1}, {2, 2, 2})));
+  EXPECT_EQ(corner.components, 1);
+  EXPECT_TRUE(corner.closed()) << corner.summary();
+  EXPECT_FALSE(corner.components_overlap);
+  std::vector<uint32_t> part;
+  EXPECT_EQ(findMeshParts(6, {{3, 4, 1}, {0, 2, 0}}, &part), 3);  // {1, 3, 4}, {0, 2} and the unused 5
+  EXPECT_EQ(part, (std::vector<uint32_t>{0, 1, 0, 1, 1, 2}));
 }
 
 TEST(MeshGridTest, ResolutionSpansTheLongestSideIncludingPadding) {
