@@ -115,8 +115,10 @@ int64_t repairOrientation(TriangleMesh* mesh, const Interrupter* interrupter) {
 
 // The mesh's connected parts (findMeshParts) and whether the bounding boxes of some two parts intersect (touching
 // counts): a sweep along the longest axis of the whole box that stops at the first such pair. Every vertex must be
-// referenced. Returns false when interrupted. Memory: 4 bytes a vertex and 52 a part (at most 17 a vertex: a part
-// has 3 vertices or more).
+// referenced. Parts whose boxes overlap along the sweep axis but nowhere else (slivers side by side) could make the
+// sweep quadratic: past 64 box tests a part (plus 2^20) it answers "overlap", the conservative side (the automatic
+// sign then takes the winding number, right on any mesh). Returns false when interrupted. Memory: 4 bytes a vertex
+// and 52 a part (at most 17 a vertex: a part has 3 vertices or more).
 bool findComponents(const TriangleMesh& mesh, const Interrupter* interrupter, int64_t* components, bool* overlap) {
   const size_t nv = mesh.vertices.size();
   std::vector<uint32_t> part;
@@ -144,7 +146,8 @@ bool findComponents(const TriangleMesh& mesh, const Interrupter* interrupter, in
   std::iota(order.begin(), order.end(), 0u);
   std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return along(box[a][0]) < along(box[b][0]); });
   std::vector<uint32_t> active;  // parts whose extent along the axis reaches the current one's start
-  size_t polled = 0;
+  size_t polled = 0, tests = 0;
+  const size_t max_tests = 64 * size_t(count) + (size_t(1) << 20);
   for (uint32_t c : order) {
     const auto& b = box[c];
     std::erase_if(active, [&](uint32_t a) { return along(box[a][1]) < along(b[0]); });
@@ -157,6 +160,11 @@ bool findComponents(const TriangleMesh& mesh, const Interrupter* interrupter, in
       }
     }
     polled += active.size() + 1;
+    tests += active.size();
+    if (tests > max_tests) {
+      *overlap = true;
+      return true;
+    }
     if (polled >= 65536) {
       polled = 0;
       if (isInterrupted(interrupter)) return false;

@@ -355,6 +355,27 @@ TEST(ValidateMeshTest, PartsAndTheirOverlapAreReported) {
   EXPECT_EQ(part, (std::vector<uint32_t>{0, 1, 0, 1, 1, 2}));
 }
 
+// Slivers side by side: their boxes all overlap along the sweep's axis (x, the longest) and nowhere else, so each part
+// is tested against every earlier one. Few of them are answered exactly (disjoint); past the sweep's budget (64 tests
+// a part plus 2^20) the answer is the conservative "overlap", so the quadratic sweep never runs on.
+TEST(ValidateMeshTest, ThePartsSweepIsBoundedAndErrsTowardsOverlap) {
+  auto slivers = [](int n) {
+    TriangleMesh m;
+    for (int i = 0; i < n; ++i) {
+      const double y = 2.0 * (i % 64), z = 2.0 * (i / 64);
+      const uint32_t v = uint32_t(m.vertices.size());
+      m.vertices.insert(m.vertices.end(), {{0, y, z}, {1000, y, z}, {0, y + 1, z + 1}});
+      m.triangles.push_back({v, v + 1, v + 2});
+    }
+    MeshReport r;
+    EXPECT_TRUE(IsOk(validateMesh(&m, &r)));
+    EXPECT_EQ(r.components, n);
+    return r.components_overlap;
+  };
+  EXPECT_FALSE(slivers(300));  // 44 850 box tests: exact
+  EXPECT_TRUE(slivers(3000));  // 4.5 million would be needed: the budget stops the sweep
+}
+
 TEST(MeshGridTest, ResolutionSpansTheLongestSideIncludingPadding) {
   TriangleMesh mesh{{{0, 0, 0}, {10, 0, 0}, {0, 5, 0}, {0, 0, 2}}, {{0, 1, 2}, {0, 1, 3}}};
   Grid g;
