@@ -17,6 +17,7 @@
 #include "core/mesh/mesh_grid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/seeds/mesh_seeds.h"
+#include "core/seeds/mesh_sign.h"
 
 namespace distband {
 namespace {
@@ -186,6 +187,7 @@ int finish(const EngineRun& engine, FieldOutputs& outputs, const InterruptWatch&
   run.complete = !result.interrupted;
   run.voxels = result.interrupted ? engine.committed_voxels : result.voxels;
   run.seconds = result.seconds;
+  run.sign_shares = result.sign_shares;
   if (result.interrupted)
     return finishStoppedRun(outputs, run, watch.deadlinePassed() ? RunStop::kDeadline : RunStop::kInterrupted,
                             "compute", ctx);
@@ -204,6 +206,7 @@ int finish(const EngineRun& engine, FieldOutputs& outputs, const InterruptWatch&
       result.voxels, result.segments.size(), result.segments.size() == 1 ? "" : "s", result.steps, result.updates,
       result.corrections, result.bricks_allocated, result.seconds, engine_seconds + secondsSince(t_write),
       secondsSince(t_write));
+  if (result.sign_shares.total() > 0) ctx.out << "sign: " << describeSignShares(result.sign_shares) << "\n";
   return kExitOk;
 }
 

@@ -298,6 +298,7 @@ std::string FieldOutputs::finish(const RunOutcome& run, std::vector<std::string>
     meta.mode = field_.mode;
     meta.sign = field_.sign;
     meta.sign_reason = field_.sign_reason;
+    meta.sign_shares = run.sign_shares;
     meta.padding_voxels = field_.padding_voxels;
     meta.band_clipped = field_.band_clipped;
     meta.segment_length_world = field_.segment_length_world;

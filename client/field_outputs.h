@@ -101,6 +101,7 @@ struct RunOutcome {
   bool complete = true;  ///< false: interrupted (only the committed segments are written)
   int64_t voxels = 0;
   double seconds = 0;
+  SignShares sign_shares;  ///< meshes: how the voxels were signed (the metadata's sign.voxels_by_test)
 };
 
 class FieldOutputs {

@@ -22,6 +22,7 @@
 #include "core/io/volume_file.h"
 #include "core/seeds/mesh_seeds.h"
 #include "core/stencil.h"
+#include "core/seeds/mesh_sign.h"
 
 namespace distband {
 namespace {
@@ -406,6 +407,10 @@ int finishQuery(const RemoteQueryResult& result, QueryReceiver& rx, const Interr
       s.voxels(), s.bricks(), result.messages, result.wire_bytes / 1e6, s.seed_seconds(), s.compute_seconds(),
       s.total_seconds(), result.first_bricks_seconds, result.total_seconds);
   RunOutcome run{true, int64_t(s.voxels()), s.total_seconds()};
+  const v1::SignShares& sh = s.sign_shares();
+  run.sign_shares = {int64_t(sh.pseudonormal()), int64_t(sh.winding_certified()), int64_t(sh.winding_per_voxel()),
+                     int64_t(sh.parity())};
+  if (run.sign_shares.total() > 0) ctx.out << "sign: " << describeSignShares(run.sign_shares) << "\n";
   std::vector<std::string> wrote;
   const std::string e = rx.outputs.finish(run, &wrote);
   for (const std::string& line : wrote) ctx.out << line << "\n";

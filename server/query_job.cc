@@ -90,6 +90,13 @@ void QueryJob::summarize(v1::QuerySummary* s) const {
   s->set_steps(uint32_t(result_.steps));
   s->set_seed_seconds(seed_seconds_);
   s->set_compute_seconds(result_.seconds);
+  if (result_.sign_shares.total() > 0) {
+    v1::SignShares* shares = s->mutable_sign_shares();
+    shares->set_pseudonormal(uint64_t(result_.sign_shares.pseudonormal));
+    shares->set_winding_certified(uint64_t(result_.sign_shares.winding_certified));
+    shares->set_winding_per_voxel(uint64_t(result_.sign_shares.winding_per_voxel));
+    shares->set_parity(uint64_t(result_.sign_shares.parity));
+  }
   for (size_t i = 0; i < result_.segments.size(); ++i) {
     const SegmentStats& st = result_.segments[i];
     v1::SegmentTiming* t = s->add_segments();

@@ -180,6 +180,7 @@ void SegmentMerger::advance() {
 void SegmentMerger::summarize(v1::QuerySummary* s) const {
   uint64_t voxels = 0, bricks = 0, steps = 0;
   double seeds = 0, compute = 0;
+  v1::SignShares shares;
   for (const v1::SegmentTiming& t : timings_) {
     voxels += t.voxels();
     bricks += t.bricks();
@@ -188,6 +189,11 @@ void SegmentMerger::summarize(v1::QuerySummary* s) const {
     steps += t.summary.steps();
     seeds += t.summary.seed_seconds();
     compute += t.summary.compute_seconds();
+    const v1::SignShares& ts = t.summary.sign_shares();
+    shares.set_pseudonormal(shares.pseudonormal() + ts.pseudonormal());
+    shares.set_winding_certified(shares.winding_certified() + ts.winding_certified());
+    shares.set_winding_per_voxel(shares.winding_per_voxel() + ts.winding_per_voxel());
+    shares.set_parity(shares.parity() + ts.parity());
   }
   s->set_voxels(voxels);
   s->set_bricks(bricks);
@@ -195,6 +201,8 @@ void SegmentMerger::summarize(v1::QuerySummary* s) const {
   s->set_steps(uint32_t(std::min<uint64_t>(steps, UINT32_MAX)));
   s->set_seed_seconds(seeds);
   s->set_compute_seconds(compute);
+  if (shares.pseudonormal() + shares.winding_certified() + shares.winding_per_voxel() + shares.parity() > 0)
+    *s->mutable_sign_shares() = shares;
   for (const v1::SegmentTiming& timing : timings_) {
     v1::SegmentTiming* out = s->add_segments();
     *out = timing;

@@ -66,7 +66,10 @@ FieldRunResult computeField(const FieldPlan& plan, const Grid& grid, FieldInputs
       case SeedKind::kMesh: throw std::invalid_argument("computeField: meshes have no separable plan");
     }
   }
-  return computeBandField(grid, std::move(inputs.seeds), plan.bandOptions(run), on_segment);
+  const std::function<SignShares()> shares = inputs.seeds.sign_shares;
+  FieldRunResult result = computeBandField(grid, std::move(inputs.seeds), plan.bandOptions(run), on_segment);
+  if (shares) result.sign_shares = shares();
+  return result;
 }
 
 }  // namespace distband

@@ -2,15 +2,16 @@
 // for the server's query jobs, `distband compute` and the benches.
 // Contract:
 //   * buildFieldInputs() turns the request's seeds (SeedSource) into the plan's inputs: the volume itself for the
-//     separable volume EDT (checked by checkVolumeMeasure), Seeds (core/seeds/) for every other plan — the band's input,
-//     and the separable point EDT's. With `window` (a tile: a box of `grid`) the inputs are for the grid the
+//     separable volume EDT (checked by checkVolumeMeasure), Seeds (core/seeds/) for every other plan — the band's
+//     input, and the separable point EDT's. With `window` (a tile: a box of `grid`) the inputs are for the grid the
 //     algorithm runs on, grid.window(*window): point sites stay in the whole grid's index space so a tile's values
 //     equal the whole grid's; a volume must then cover the window. Mesh seeds poll `interrupter`. Returns OK,
 //     kInvalidArgument naming what is wrong with the seeds (an empty mask, a signed volume without outside, ...),
 //     or kCancelled / the interrupter's status when it stopped the build.
 //   * computeField() runs the plan's algorithm on its inputs under the run contract (core/field/field_run.h); what
 //     each algorithm adds is its entry point's contract: core/band/band_engine.h, core/separable/volume_edt.h,
-//     core/separable/point_edt.h. `run` is plan.runOptions() plus the run's threads, interrupter and chunking.
+//     core/separable/point_edt.h. `run` is plan.runOptions() plus the run's threads, interrupter and chunking. A signed
+//     mesh field's result also says how its voxels were signed (FieldRunResult::sign_shares).
 //     Throws std::invalid_argument for a broken precondition (inputs not built for this plan).
 // Thread-safe; the inputs are moved in and freed as the algorithm allows.
 #pragma once

@@ -28,6 +28,7 @@
 #include "core/brick.h"
 #include "core/grid.h"
 #include "core/interrupter.h"
+#include "core/seeds/seeds.h"
 #include "core/status.h"
 
 namespace distband {
@@ -63,6 +64,7 @@ struct FieldRunResult {
   int64_t updates = 0;          ///< accepted site updates
   int64_t corrections = 0;      ///< voxels improved by the second-ring correction
   int64_t bricks_allocated = 0;  ///< bricks of state held at the end
+  SignShares sign_shares;        ///< signed mesh fields: how the delivered voxels were signed (computeField)
 };
 
 using SegmentCallback = std::function<void(SegmentBricks&&)>;

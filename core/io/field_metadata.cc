@@ -41,7 +41,14 @@ std::string fieldMetadataJson(const FieldMetadata& m) {
       {"complete_up_to", finiteOrNull(m.complete_up_to_world)},
       {"band_clipped", m.band_clipped},
   };
-  if (!m.sign.empty()) j["sign"] = {{"method", m.sign}, {"reason", m.sign_reason}};
+  if (!m.sign.empty()) {
+    j["sign"] = {{"method", m.sign}, {"reason", m.sign_reason}};
+    if (m.sign_shares.total() > 0)
+      j["sign"]["voxels_by_test"] = {{"pseudonormal", m.sign_shares.pseudonormal},
+                                     {"winding_certified", m.sign_shares.winding_certified},
+                                     {"winding_per_voxel", m.sign_shares.winding_per_voxel},
+                                     {"parity", m.sign_shares.parity}};
+  }
   if (m.padding_voxels >= 0) j["padding_voxels"] = m.padding_voxels;
   if (!m.closest_file.empty()) j["closest"] = {{"data_file", m.closest_file}, {"feature", m.closest_feature}};
   return j.dump(2) + "\n";

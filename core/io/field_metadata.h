@@ -10,6 +10,7 @@
 #include <string>
 
 #include "core/grid.h"
+#include "core/seeds/seeds.h"
 #include "core/status.h"
 
 namespace distband {
@@ -27,6 +28,7 @@ struct FieldMetadata {
   double seconds = 0;
   std::string sign;         ///< the sign method in force ("" when unsigned or not a mesh)
   std::string sign_reason;  ///< why (e.g. "auto: the mesh is closed")
+  SignShares sign_shares;   ///< how many voxels each sign test decided (meshes; all 0 when not known)
   int padding_voxels = -1;  ///< the padding around the seeds' bounds (-1: not applicable, explicit dims)
   bool band_clipped = false;  ///< the padding was smaller than the limit in voxels
   /// False when the run was interrupted: the file holds the `segments` complete segments received, i.e. every voxel

@@ -1,6 +1,7 @@
 #include "core/seeds/mesh_seeds.h"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <chrono>
 #include <stdexcept>
@@ -279,8 +280,18 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
     std::shared_ptr<const MeshSign> sign = std::move(built);
     const double voxel_size = grid.voxelSize();
     if (site_triangle->empty()) site_triangle.reset();
-    seeds.sign = [sign, site_triangle, voxel_size, scale](Brick& brick, const uint32_t* sites) {
-      sign->signBrick(brick, sites, site_triangle ? site_triangle->data() : nullptr, voxel_size, scale);
+    // Per-test voxel counts, shared by the threads that sign bricks (a few relaxed adds a brick).
+    auto tally = std::make_shared<std::array<std::atomic<int64_t>, 4>>();
+    seeds.sign = [sign, site_triangle, voxel_size, scale, tally](Brick& brick, const uint32_t* sites) {
+      const SignShares s =
+          sign->signBrick(brick, sites, site_triangle ? site_triangle->data() : nullptr, voxel_size, scale);
+      const int64_t counts[4] = {s.pseudonormal, s.winding_certified, s.winding_per_voxel, s.parity};
+      for (int k = 0; k < 4; ++k)
+        if (counts[k]) (*tally)[size_t(k)].fetch_add(counts[k], std::memory_order_relaxed);
+    };
+    seeds.sign_shares = [tally] {
+      auto at = [&](int k) { return (*tally)[size_t(k)].load(std::memory_order_relaxed); };
+      return SignShares{at(0), at(1), at(2), at(3)};
     };
   }
   if (seeds.kind == SiteKind::kTriangle) seeds.triangles = std::move(tris);

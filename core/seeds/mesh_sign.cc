@@ -65,6 +65,19 @@ SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std
   return SignMethod::kWinding;
 }
 
+std::string describeSignShares(const SignShares& s) {
+  const int64_t n = s.total();
+  if (n == 0) return "";
+  auto share = [n](int64_t k) { return fmt::format("{:.1f} %", 100.0 * double(k) / double(n)); };
+  std::vector<std::string> parts;
+  if (s.pseudonormal) parts.push_back(fmt::format("pseudonormal {}", share(s.pseudonormal)));
+  if (s.winding_certified)
+    parts.push_back(fmt::format("winding number by one query a brick {}", share(s.winding_certified)));
+  if (s.winding_per_voxel) parts.push_back(fmt::format("winding number per voxel {}", share(s.winding_per_voxel)));
+  if (s.parity) parts.push_back(fmt::format("ray parity {}", share(s.parity)));
+  return fmt::format("{} voxels signed: {}", n, fmt::join(parts, ", "));
+}
+
 namespace {
 
 Vec3d normalized(const Vec3d& v) {
@@ -472,8 +485,8 @@ bool MeshSign::inside(const Vec3d& p, uint32_t triangle, double distance) const 
   }
 }
 
-void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
-                         const Vec3d& scale) const {
+SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
+                               const Vec3d& scale) const {
   const Tables& s = *tables_;
   auto unitsOf = [&scale](const Coord& c) { return Vec3d{c.x * scale.x, c.y * scale.y, c.z * scale.z}; };
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
@@ -501,7 +514,7 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
           brick.values[i] = -std::abs(brick.values[i]);
           return true;
         });
-      return;
+      return {brick.mask.count(), 0, 0, 0};
     }
     uint32_t last = kNoSite;
     Vec3d n{}, v0{};
@@ -522,12 +535,12 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
       if (in) brick.values[i] = -std::abs(brick.values[i]);
       return true;
     });
-    return;
+    return {brick.mask.count(), 0, 0, 0};
   }
   if (method_ == SignMethod::kWinding) {
     // Isolated: a thread that waits for the build inside it must not pick up another brick's task meanwhile.
     std::call_once(tables_->boundary_once, [&] { tbb::this_task_arena::isolate([&] { tables_->buildBoundaryDistances(); }); });
-    if (s.signWindingCertified(brick, sites, site_triangle, voxel_size, scale)) return;
+    if (s.signWindingCertified(brick, sites, site_triangle, voxel_size, scale)) return {0, brick.mask.count(), 0, 0};
   }
   // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
   // surface. A voxel's distance to the surface is a ball around it that no surface crosses: parity is constant there,
@@ -570,6 +583,8 @@ void MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32_t* si
     }
     if (in) brick.values[i] = -std::abs(brick.values[i]);
   }
+  const int64_t n = brick.mask.count();
+  return method_ == SignMethod::kWinding ? SignShares{0, 0, n, 0} : SignShares{0, 0, 0, n};
 }
 
 uint64_t MeshSign::memoryBytes() const {

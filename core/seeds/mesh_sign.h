@@ -30,6 +30,7 @@
 #include "core/brick.h"
 #include "core/interrupter.h"
 #include "core/mesh/triangle_mesh.h"
+#include "core/seeds/seeds.h"
 #include "core/status.h"
 #include "core/types.h"
 
@@ -55,6 +56,10 @@ bool parseSignMethod(std::string_view name, SignMethod* method);
 /// "auto: the mesh is closed but its parts overlap (2 parts, bounding boxes intersect)", or "requested".
 SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std::string* reason);
 
+/// For users: e.g. "1204332 voxels signed: winding number by one query a brick 71.3 %, winding number per voxel
+/// 28.7 %"; "" when nothing was signed.
+std::string describeSignShares(const SignShares& shares);
+
 class MeshSign {
  public:
   /// `method` must be kPseudonormal, kWinding or kParity. kInvalidArgument for another method or a corner out of
@@ -75,8 +80,9 @@ class MeshSign {
   /// the point scale * (x, y, z) (core/grid.h: Grid::axisScale, all 1 on a cubic grid); values in world units,
   /// `voxel_size` per unit. `sites[i]` is the site of voxel offset i (kNoSite: none); `site_triangle` maps a site to
   /// its triangle (null: the site is the triangle).
-  void signBrick(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
-                 const Vec3d& scale = {1, 1, 1}) const;
+  /// Returns how many of the brick's delivered voxels each test decided.
+  SignShares signBrick(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
+                       const Vec3d& scale = {1, 1, 1}) const;
 
   /// Bytes held (for memory budgets).
   uint64_t memoryBytes() const;

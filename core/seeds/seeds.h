@@ -17,7 +17,8 @@
 //     sits on as its linear index in the engine's grid (Grid::denseIndex; volumes, whose sites are boundary
 //     voxels), kNoSite voxels (the seed volume's inside) being their own feature.
 //   * `sign` (optional): called on every delivered brick to turn unsigned distances into signed ones
-//     (negative inside, OpenVDB's convention); it receives each masked voxel's site.
+//     (negative inside, OpenVDB's convention); it receives each masked voxel's site. `sign_shares` (with it): how
+//     many of the voxels signed so far each test decided (SignShares), for reports.
 #pragma once
 
 #include <array>
@@ -36,6 +37,24 @@ namespace distband {
 inline constexpr uint32_t kNoSite = std::numeric_limits<uint32_t>::max() - 1;
 
 enum class SiteKind { kPoint, kTriangle };
+
+/// How the delivered voxels of a signed mesh field were signed: each voxel counts once, under the test that decided
+/// it (core/seeds/mesh_sign.h).
+struct SignShares {
+  int64_t pseudonormal = 0;       ///< the pseudonormal test
+  int64_t winding_certified = 0;  ///< the winding number, one query a brick where the pseudonormal provably agrees
+  int64_t winding_per_voxel = 0;  ///< the winding number, per voxel (a query, or inside a queried voxel's safe ball)
+  int64_t parity = 0;             ///< ray parity
+  int64_t total() const { return pseudonormal + winding_certified + winding_per_voxel + parity; }
+  SignShares& operator+=(const SignShares& o) {
+    pseudonormal += o.pseudonormal;
+    winding_certified += o.winding_certified;
+    winding_per_voxel += o.winding_per_voxel;
+    parity += o.parity;
+    return *this;
+  }
+  friend bool operator==(const SignShares&, const SignShares&) = default;
+};
 
 struct BandVoxel {
   Coord voxel;
@@ -57,6 +76,7 @@ struct Seeds {
   std::vector<uint32_t> site_feature;  ///< kSiteIndex: the feature of each site (empty: the site index)
   /// Signs the masked values of `brick` in place; `sites[i]` is the site of voxel offset i (kNoSite if none).
   std::function<void(Brick& brick, const uint32_t* sites)> sign;
+  std::function<SignShares()> sign_shares;  ///< with `sign`: the voxels it signed so far, by test
 
   size_t siteCount() const { return kind == SiteKind::kPoint ? points.size() : triangles.size(); }
 };

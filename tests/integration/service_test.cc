@@ -263,6 +263,12 @@ TEST(ServiceTest, MeshUploadInChunksAndQueryMatchInProcess) {
   ASSERT_TRUE(s.result.status.ok()) << s.result.status.error_message();
   EXPECT_TRUE(s.order_error.empty()) << s.order_error;
   EXPECT_EQ(s.result.header.sign(), v1::SIGN_MODE_PSEUDONORMAL);
+  // The summary says how the voxels were signed: all of them by the pseudonormal test here.
+  EXPECT_GT(s.result.summary.voxels(), 0u);
+  EXPECT_EQ(s.result.summary.sign_shares().pseudonormal(), s.result.summary.voxels());
+  EXPECT_EQ(s.result.summary.sign_shares().winding_certified() + s.result.summary.sign_shares().winding_per_voxel() +
+                s.result.summary.sign_shares().parity(),
+            0u);
 
   // The same pipeline in-process: parse, grid, seeds, engine.
   const std::string path = (std::filesystem::temp_directory_path() / "distband_service_test_cube.obj").string();

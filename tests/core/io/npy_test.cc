@@ -335,6 +335,14 @@ TEST(FieldMetadataTest, DescribesTheField) {
   for (const char* s : {"\"dims\"", "10,", "\"voxel_size\": 0.25", "\"origin\"", "-2.0", "\"limit\": 2.5",
                         "negative inside", "\"stencil\": \"cubic26\"", "[z][y][x]"})
     EXPECT_NE(j.find(s), std::string::npos) << s << " missing in\n" << j;
+  EXPECT_EQ(j.find("voxels_by_test"), std::string::npos);  // not a mesh sign
+  meta.sign = "winding";
+  meta.sign_reason = "auto: the mesh is not closed (12 boundary edges)";
+  meta.sign_shares = {0, 700, 300, 0};
+  const std::string js = fieldMetadataJson(meta);
+  for (const char* s : {"\"method\": \"winding\"", "\"voxels_by_test\"", "\"winding_certified\": 700",
+                        "\"winding_per_voxel\": 300", "\"pseudonormal\": 0"})
+    EXPECT_NE(js.find(s), std::string::npos) << s << " missing in\n" << js;
   meta.limit_world = std::numeric_limits<double>::infinity();
   EXPECT_NE(fieldMetadataJson(meta).find("\"limit\": null"), std::string::npos);
   const std::string path = tempPath("field.json");
