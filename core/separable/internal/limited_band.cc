@@ -443,6 +443,20 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
     const int o1 = axis == 2 ? 1 : 2;  // the second other axis: the lanes of a bundle
     const int reach = reach_voxels[axis];
     const double wa = w2[axis];
+    // The window's eight lines side by side (s.lanes, from index reach): the cells of the bundle, padded by `reach` far
+    // rows at each end. Returns whether any cell is not far. Generic for the reason multiLabelWindow is.
+    auto loadLanes = [&](auto& s, int w_end, int length, const auto& at) {
+      auto* lane = s.lanes.data() + reach;
+      bool any = false;
+      for (int i = -reach; i < length + reach; ++i) lane[i].fill(windowFar<C>());
+      for (int i = 0; i < length; ++i)
+        for (int w = 0; w < w_end; ++w) {
+          const C f = at(i, w);
+          any |= !Ops::isFar(f);
+          if (!Ops::isFar(f)) lane[i][size_t(w)] = f;
+        }
+      return any;
+    };
     // A multi-label run's labels, read once for its 8 x 8 lines (a line along y or z alone reads a cache line per
     // voxel): block[(i + reach) * 64 + w * 8 + u] is the label of line (u, w) at position i of the run, for i in
     // [-known.before, length + known.after). Called for u = 0, before the run's lines.
@@ -509,12 +523,7 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
         for (int w = 0; w < kBrickSize; ++w)
           lab[i][size_t(w)] = border_after ? T(0) : lab[length + known.after - 1][size_t(w)];
       const V far = windowFar<V>();
-      for (int i = -reach; i < length + reach; ++i) lane[i].fill(far);
-      for (int i = 0; i < length; ++i)
-        for (int w = 0; w < w_end; ++w) {
-          const C f = at(i, w);
-          if (!Ops::isFar(f)) lane[i][size_t(w)] = f;
-        }
+      loadLanes(s, w_end, length, at);
       // How far each voxel's label run goes on below and above, capped at the reach: a run end within the reach is
       // the first voxel of another label, one step past it.
       s.run_lo.resize(span);
@@ -559,17 +568,8 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
             }
           }
           if (window) {
-            // Eight lines at once, side by side, padded by `reach` far rows at each end.
             auto* lane = s.lanes.data() + reach;
-            bool any = false;
-            for (int i = -reach; i < length + reach; ++i) lane[i].fill(windowFar<C>());
-            for (int i = 0; i < length; ++i)
-              for (int w = 0; w < w_end; ++w) {
-                const C f = at(i, w);
-                any |= !Ops::isFar(f);
-                if (!Ops::isFar(f)) lane[i][size_t(w)] = f;
-              }
-            if (!any) return;
+            if (!loadLanes(s, w_end, length, at)) return;
             for (int i = 0; i < length; ++i) {
               std::array<C, kBrickSize> m = lane[i];
               for (int k = 1; k <= reach; ++k) {
