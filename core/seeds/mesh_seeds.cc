@@ -63,24 +63,92 @@ struct Candidate {
 
 namespace {
 
+// The triangles of `mesh` that can matter in `grid`, as a sub-mesh in `sub` with `chosen[i]` the mesh's index of its
+// triangle i (increasing, so ties between triangles resolve as on the whole mesh); `chosen` stays empty when all of
+// them can. With a finite limit and pseudonormal or no signs, a triangle matters only if its bounding box grown by
+// the limit (plus a voxel, for rounding) reaches the grid's box: a delivered voxel's closest triangle is within the
+// limit, and so is every face around the closest feature whose pseudonormal signs it (each contains that feature's
+// closest point), so values, closest triangles and signs are those of the whole mesh. Winding and parity signs read
+// the whole surface, and without a limit every triangle may be a voxel's closest: then the whole mesh is used.
+// Costs one pass over the triangles reading their corners, and memory for the chosen ones only: a tile of a
+// multi-million-triangle mesh no longer copies, normalises and signs every triangle.
+Status chooseTriangles(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, TriangleMesh* sub,
+                       std::vector<uint32_t>* chosen) {
+  if (!std::isfinite(options.limit_voxels) ||
+      (options.sign != SignMethod::kPseudonormal && options.sign != SignMethod::kUnsigned))
+    return Status::Ok();
+  const size_t nt = mesh.triangles.size();
+  // The grid's box grown by the reach, in world space (no division per corner; the voxel of margin is far above
+  // rounding).
+  const double reach = (options.limit_voxels * grid.maxAxisScale() + grid.maxAxisScale()) * grid.voxelSize();
+  const Coord dims = grid.dims();
+  const Vec3d lo = grid.worldOf({0, 0, 0}) - Vec3d{reach, reach, reach};
+  const Vec3d hi = grid.worldOf({dims.x - 1, dims.y - 1, dims.z - 1}) + Vec3d{reach, reach, reach};
+  std::vector<uint8_t> reaches(nt);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, nt, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    if (tbb::is_current_task_group_canceling()) return;
+    for (size_t t = r.begin(); t != r.end(); ++t) {
+      const auto& c = mesh.triangles[t];
+      const Vec3d& a = mesh.vertices[c[0]];
+      const Vec3d& b = mesh.vertices[c[1]];
+      const Vec3d& d = mesh.vertices[c[2]];
+      reaches[t] = std::max({a.x, b.x, d.x}) >= lo.x && std::min({a.x, b.x, d.x}) <= hi.x &&
+                   std::max({a.y, b.y, d.y}) >= lo.y && std::min({a.y, b.y, d.y}) <= hi.y &&
+                   std::max({a.z, b.z, d.z}) >= lo.z && std::min({a.z, b.z, d.z}) <= hi.z;
+    }
+  });
+  if (isInterrupted(options.interrupter)) return interruptedStatus(options.interrupter);
+  const size_t count = size_t(std::count(reaches.begin(), reaches.end(), uint8_t(1)));
+  if (count == nt || count == 0) return Status::Ok();  // none: the scan finds an empty band, as it always has
+  chosen->reserve(count);
+  for (size_t t = 0; t < nt; ++t)
+    if (reaches[t]) chosen->push_back(uint32_t(t));
+  // The sub-mesh's vertices: the chosen triangles' corners, sorted (their order in the mesh).
+  std::vector<uint32_t> used;
+  used.reserve(3 * count);
+  for (uint32_t t : *chosen) used.insert(used.end(), mesh.triangles[t].begin(), mesh.triangles[t].end());
+  std::sort(used.begin(), used.end());
+  used.erase(std::unique(used.begin(), used.end()), used.end());
+  sub->vertices.resize(used.size());
+  for (size_t v = 0; v < used.size(); ++v) sub->vertices[v] = mesh.vertices[used[v]];
+  sub->triangles.resize(count);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t v = mesh.triangles[(*chosen)[i]][k];
+        sub->triangles[i][k] = uint32_t(std::lower_bound(used.begin(), used.end(), v) - used.begin());
+      }
+  });
+  return Status::Ok();
+}
+
 // makeMeshSeeds' work, run under runInterruptible (every TBB task it starts stops when the interrupter trips); its
 // serial loops poll too. TBB only cancels tasks not yet started, and a parallel_for hands a thread ranges of up to
 // 1/(4 x threads) of the loop (hundreds of ms at 1024^3), so loop bodies check is_current_task_group_canceling().
-Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
-                           MeshSeedStats* stats) {
+Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const MeshSeedOptions& options, Seeds* out,
+                      MeshSeedStats* stats) {
   const auto start = std::chrono::steady_clock::now();
   const Interrupter* interrupter = options.interrupter;
   if (Status s = grid.validate(); !s.ok()) return s.withPrefix("grid");
-  if (mesh.triangles.empty()) return Status::InvalidArgument("the mesh has no triangles");
+  if (whole_mesh.triangles.empty()) return Status::InvalidArgument("the mesh has no triangles");
   if (!(options.band_radius_voxels > 0 && options.band_radius_voxels <= 8))
     return Status::InvalidArgument(fmt::format("band radius must be in (0, 8] voxels (got {})", options.band_radius_voxels));
   if (!(options.limit_voxels > 0)) return Status::InvalidArgument(fmt::format("limit must be > 0 (got {})", options.limit_voxels));
   if (options.sign == SignMethod::kAuto) throw std::invalid_argument("makeMeshSeeds: the sign method auto must be resolved first (resolveSignMethod)");
-  for (const auto& t : mesh.triangles)
+  for (const auto& t : whole_mesh.triangles)
     for (uint32_t i : t)
-      if (i >= mesh.vertices.size()) return Status::InvalidArgument("a triangle refers to a vertex that does not exist");
+      if (i >= whole_mesh.vertices.size())
+        return Status::InvalidArgument("a triangle refers to a vertex that does not exist");
+  if (whole_mesh.triangles.size() >= kNoSite)
+    return Status::ResourceExhausted(fmt::format("the mesh has {} triangles, more than the engine's {} sites",
+                                                 whole_mesh.triangles.size(), kNoSite - 1));
+  // Only the triangles that can reach the grid (a tile's window of a big mesh: a small share of it); `chosen` maps
+  // the sub-mesh's triangles back to the mesh's (empty: every triangle reaches it, the mesh is used as it is).
+  TriangleMesh sub;
+  std::vector<uint32_t> chosen;
+  if (Status s = chooseTriangles(grid, whole_mesh, options, &sub, &chosen); !s.ok()) return s;
+  const TriangleMesh& mesh = chosen.empty() ? whole_mesh : sub;
   const size_t nt = mesh.triangles.size();
-  if (nt >= kNoSite) return Status::ResourceExhausted(fmt::format("the mesh has {} triangles, more than the engine's {} sites", nt, kNoSite - 1));
 
   // Unit-space copies (core/grid.h), in parallel: serial, these loops were ~20 ms of a 52 k-triangle mesh's seeds.
   std::vector<Vec3d> verts(mesh.vertices.size());  // unit space
@@ -266,11 +334,12 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeed
       const Vec3d p{bv.voxel.x * scale.x, bv.voxel.y * scale.y, bv.voxel.z * scale.z};  // units
       seeds.points[i] = closestPointOnTriangle(p, tri[0], tri[1], tri[2]);
       if (!site_triangle->empty()) (*site_triangle)[i] = bv.site;
-      seeds.site_feature[i] = bv.site;
+      seeds.site_feature[i] = chosen.empty() ? bv.site : chosen[bv.site];
       bv.site = static_cast<uint32_t>(i);
     });
   } else {
     seeds.kind = SiteKind::kTriangle;
+    seeds.site_feature = std::move(chosen);  // closest features name the mesh's triangles (empty: the same ids)
   }
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   if (options.sign != SignMethod::kUnsigned) {

@@ -10,6 +10,10 @@
 //     propagates triangle ids and evaluates the exact point–triangle distance where they arrive.
 //   * kPaper: sites are the band voxels' closest points (Seeds::kPoint), propagated as CP + PQ (paper eq. 2);
 //     each site remembers its triangle for the sign.
+// A big mesh seen through a small grid (a tile's window): with a finite limit and pseudonormal or no signs, only the
+// triangles whose bounding box grown by the limit reaches the grid are read (one pass over the triangles' corners;
+// the copies, normals, sign tables and sites then hold those alone, in the mesh's order). Values, closest triangles and
+// signs are the whole mesh's (closest features keep the mesh's triangle ids: Seeds::site_feature).
 // Sign (negative inside): Seeds::sign is set unless the method is kUnsigned: MeshSign::signBrick
 // (core/seeds/mesh_sign.h, the sign test point queries use too) on the mesh in index space, the voxel's site triangle
 // its closest. It reads only immutable shared state (captured by shared_ptr), so it is thread-safe.
