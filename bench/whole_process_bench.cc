@@ -10,7 +10,8 @@
 //     whose origin, voxel size, dims and limit (W' = limit / voxel size) are passed to the peer. Nothing here derives
 //     a grid or a padding.
 //   * Timed: wall seconds from fork to wait4's return, and the child's CPU seconds (user + system, from wait4's
-//     rusage: all its threads). Reported: medians of --reps, and the ratio distband / OpenVDB of each.
+//     rusage: all its threads), and each child's peak RSS (rusage's ru_maxrss, the largest over the timed runs).
+//     Reported: medians of --reps, and the ratio distband / OpenVDB of each.
 //   * distband's own phase lines ("engine ... s, total ... s (write ... s)") are read from its stdout, so the
 //     in-process part can be told from process start-up and exit: load+seeds = total - engine - write (mesh read,
 //     grid, plan, seeds, output set-up), start+exit = wall - total (exec, dynamic loading, static initialisers,
@@ -280,10 +281,11 @@ int main(int argc, char** argv) {
   std::string md = fmt::format(
       "Whole process, exec to exit (read mesh, narrow band half-width {} voxels, write .vdb); medians of {} "
       "alternating runs; CPU = user + system of the child (all threads).\n\n"
-      "| mesh | res | threads | distband s | OpenVDB s | ratio | distband CPU s | OpenVDB CPU s | CPU ratio | "
-      "distband load+seeds s | distband engine s | distband write s | distband start+exit s | active voxels distband / "
+      "| mesh | res | threads | distband s | OpenVDB s | ratio | distband CPU s | OpenVDB CPU s | CPU ratio | peak RSS "
+      "MiB distband / OpenVDB | RSS ratio | distband load+seeds s | distband engine s | distband write s | distband "
+      "start+exit s | active voxels distband / "
       "OpenVDB | max diff (vox) | sign diff | same job |\n"
-      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
       half_width, reps);
   std::fputs(md.c_str(), stdout);
   std::fflush(stdout);
@@ -334,12 +336,14 @@ int main(int argc, char** argv) {
         }
         if (!agree.mismatch.empty()) verdict.fail(name, agree.mismatch);
         std::vector<double> dw, dc, pw, pc, engine, write, before_engine, outside_main;
+        double d_rss = 0, p_rss = 0;  // peak RSS, MiB: the largest over the timed runs
         for (int r = 0; r < reps; ++r) {
           auto runDistband = [&] {
             const ChildRun c = runChild(dist_args, dist_log);
             if (c.status != 0) verdict.fail(name, fmt::format("distband failed (exit {})", c.status));
             dw.push_back(c.wall_s);
             dc.push_back(c.cpu_s);
+            d_rss = std::max(d_rss, c.max_rss_mb);
             const std::string log = readText(dist_log);
             engine.push_back(phaseSeconds(log, "engine "));
             write.push_back(phaseSeconds(log, "(write "));
@@ -352,6 +356,7 @@ int main(int argc, char** argv) {
             if (c.status != 0) verdict.fail(name, fmt::format("the OpenVDB peer failed (exit {})", c.status));
             pw.push_back(c.wall_s);
             pc.push_back(c.cpu_s);
+            p_rss = std::max(p_rss, c.max_rss_mb);
           };
           if (r % 2 == 0) {
             runDistband();
@@ -363,12 +368,11 @@ int main(int argc, char** argv) {
         }
         const double dwm = median(dw), pwm = median(pw), dcm = median(dc), pcm = median(pc);
         const std::string line = fmt::format(
-            "| {} | {}³ | {} | {:.3f} | {:.3f} | **{:.2f}×** | {:.3f} | {:.3f} | {:.2f}× | {:.3f} | {:.3f} | {:.3f} | "
-            "{:.3f} | {} / {} | {:.3f} | {} | {} |\n",
-            mesh, res, t, dwm, pwm, dwm / pwm, dcm, pcm, dcm / pcm, median(before_engine), median(engine),
-            median(write), median(outside_main),
-            agree.distband_active, agree.openvdb_active, agree.max_diff_vox, agree.sign_disagree,
-            agree.mismatch.empty() ? "yes" : "**NO**");
+            "| {} | {}³ | {} | {:.3f} | {:.3f} | **{:.2f}×** | {:.3f} | {:.3f} | {:.2f}× | {:.0f} / {:.0f} | {:.2f}× | "
+            "{:.3f} | {:.3f} | {:.3f} | {:.3f} | {} / {} | {:.3f} | {} | {} |\n",
+            mesh, res, t, dwm, pwm, dwm / pwm, dcm, pcm, dcm / pcm, d_rss, p_rss, d_rss / p_rss, median(before_engine),
+            median(engine), median(write), median(outside_main), agree.distband_active, agree.openvdb_active,
+            agree.max_diff_vox, agree.sign_disagree, agree.mismatch.empty() ? "yes" : "**NO**");
         md += line;
         std::fputs(line.c_str(), stdout);
         std::fflush(stdout);
@@ -383,6 +387,8 @@ int main(int argc, char** argv) {
                         {"distband_cpu_s", dcm},
                         {"openvdb_cpu_s", pcm},
                         {"ratio_cpu", dcm / pcm},
+                        {"distband_peak_rss_mib", d_rss},
+                        {"openvdb_peak_rss_mib", p_rss},
                         {"distband_engine_s", median(engine)},
                         {"distband_write_s", median(write)},
                         {"distband_load_seeds_s", median(before_engine)},

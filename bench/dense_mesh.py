@@ -1,0 +1,68 @@
+#!/usr/bin/env python3
+"""Write a dense triangle mesh for the big-mesh benchmarks: a bundled OFF mesh with every triangle split in four,
+--levels times (edge midpoints shared, so a closed mesh stays closed and the surface is unchanged), as binary PLY.
+
+    bench/dense_mesh.py ../shared/data/meshes/armadillo.off --levels 3 --out /tmp/armadillo_3m.ply   # 3.33 M triangles
+"""
+import argparse
+import struct
+import sys
+
+
+def read_off(path):
+    words = open(path).read().split()
+    if words[0] != "OFF":
+        sys.exit(f"{path}: not an OFF file")
+    nv, nf = int(words[1]), int(words[2])
+    at = 4
+    vertices = [tuple(float(w) for w in words[at + 3 * i:at + 3 * i + 3]) for i in range(nv)]
+    at += 3 * nv
+    triangles = []
+    for _ in range(nf):
+        k = int(words[at])
+        if k != 3:
+            sys.exit(f"{path}: a face with {k} vertices")
+        triangles.append((int(words[at + 1]), int(words[at + 2]), int(words[at + 3])))
+        at += 4
+    return vertices, triangles
+
+
+def subdivide(vertices, triangles):
+    midpoints = {}
+
+    def mid(a, b):
+        key = (a, b) if a < b else (b, a)
+        m = midpoints.get(key)
+        if m is None:
+            m = midpoints[key] = len(vertices)
+            va, vb = vertices[a], vertices[b]
+            vertices.append(((va[0] + vb[0]) / 2, (va[1] + vb[1]) / 2, (va[2] + vb[2]) / 2))
+        return m
+
+    out = []
+    for a, b, c in triangles:
+        ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
+        out += [(a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca)]
+    return vertices, out
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("mesh")
+    p.add_argument("--levels", type=int, default=3)
+    p.add_argument("--out", required=True)
+    a = p.parse_args()
+    vertices, triangles = read_off(a.mesh)
+    for _ in range(a.levels):
+        vertices, triangles = subdivide(vertices, triangles)
+    with open(a.out, "wb") as f:
+        f.write(("ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+                 "property float z\nelement face %d\nproperty list uchar int vertex_indices\nend_header\n"
+                 % (len(vertices), len(triangles))).encode())
+        f.write(b"".join(struct.pack("<3f", *v) for v in vertices))
+        f.write(b"".join(struct.pack("<B3i", 3, *t) for t in triangles))
+    print(f"{a.out}: {len(vertices)} vertices, {len(triangles)} triangles")
+
+
+if __name__ == "__main__":
+    main()
