@@ -206,6 +206,7 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
         for (int x = lo.x >> 3; x <= hi.x >> 3; ++x)
           cand[o++] = {grid.brickIndex({x, y, z}), uint32_t(t)};
   });
+  std::vector<uint64_t>().swap(offsets);
   tbb::parallel_sort(cand.begin(), cand.end(), [](const Candidate& a, const Candidate& b) {
     return a.brick < b.brick || (a.brick == b.brick && a.tri < b.tri);
   });
@@ -291,6 +292,7 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
     scaled ? scanBrick(b, std::true_type{}) : scanBrick(b, std::false_type{});
   });
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
+  std::vector<Vec3d>().swap(normals);  // the scan's alone: not held while the sign tables are built
   const size_t scratch_bytes = cand.size() * sizeof(Candidate);
   std::vector<Candidate>().swap(cand);
   std::vector<size_t> band_at(nbricks + 1, 0);

@@ -227,59 +227,78 @@ struct MeshSign::Tables {
 };
 
 void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
-  const size_t nt = corners.size();
+  const size_t nt = corners.size(), nv = verts.size();
   auto stop = [&](size_t i) { return (i & 0xFFFF) == 0 && isInterrupted(interrupter); };
-  std::vector<Vec3d> face(nt);
-  std::vector<std::array<double, 3>> angles(nt);
-  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
-    if (tbb::is_current_task_group_canceling()) return;
+  // Triangle t's unit normal in double precision; computed again where needed rather than kept (24 bytes a triangle).
+  auto faceNormal = [&](size_t t) {
     const auto& c = corners[t];
-    const Vec3d tri[3] = {verts[c[0]], verts[c[1]], verts[c[2]]};
-    face[t] = normalized((tri[1] - tri[0]).cross(tri[2] - tri[0]));
-    for (int k = 0; k < 3; ++k) {
-      const Vec3d e1 = normalized(tri[(k + 1) % 3] - tri[k]), e2 = normalized(tri[(k + 2) % 3] - tri[k]);
-      angles[t][k] = std::acos(std::clamp(e1.dot(e2), -1.0, 1.0));
-    }
-  });
-  std::vector<Vec3d> vertex(verts.size());
-  for (size_t t = 0; t < nt; ++t) {
-    if (stop(t)) return;
-    for (int k = 0; k < 3; ++k) vertex[corners[t][k]] = vertex[corners[t][k]] + face[t] * angles[t][k];
-  }
-  vertex_n.resize(vertex.size());
-  face_n.resize(nt);
-  // Edge pseudonormal: the sum of the normals of the triangles sharing the edge.
-  struct EdgeUse {
-    uint64_t key;
-    uint32_t slot;  // 3 * triangle + edge
+    return normalized((verts[c[1]] - verts[c[0]]).cross(verts[c[2]] - verts[c[0]]));
   };
-  std::vector<EdgeUse> uses(3 * nt);
-  // Independent per element, so in parallel (serial, these loops were a good part of the seeds' time).
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, vertex.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t v = r.begin(); v != r.end(); ++v) vertex_n[v] = Normal3f(normalized(vertex[v]));
-  });
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, nt, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t t = r.begin(); t != r.end(); ++t) {
+  face_n.resize(nt);
+  {
+    std::vector<Vec3d> face(nt);
+    // Vertex pseudonormal: the angle-weighted sum of the normals of the triangles around the vertex, in triangle order.
+    std::vector<std::array<double, 3>> angles(nt);
+    tbb::parallel_for(size_t(0), nt, [&](size_t t) {
+      if (tbb::is_current_task_group_canceling()) return;
+      const auto& c = corners[t];
+      const Vec3d tri[3] = {verts[c[0]], verts[c[1]], verts[c[2]]};
+      face[t] = faceNormal(t);
       face_n[t] = Normal3f(face[t]);
-      for (int e = 0; e < 3; ++e) {
-        const uint64_t a = corners[t][e], b = corners[t][(e + 1) % 3];
-        uses[3 * t + e] = {std::min(a, b) << 32 | std::max(a, b), uint32_t(3 * t + e)};
+      for (int k = 0; k < 3; ++k) {
+        const Vec3d e1 = normalized(tri[(k + 1) % 3] - tri[k]), e2 = normalized(tri[(k + 2) % 3] - tri[k]);
+        angles[t][k] = std::acos(std::clamp(e1.dot(e2), -1.0, 1.0));
+      }
+    });
+    std::vector<Vec3d> vertex(nv);
+    for (size_t t = 0; t < nt; ++t) {
+      if (stop(t)) return;
+      for (int k = 0; k < 3; ++k) vertex[corners[t][k]] = vertex[corners[t][k]] + face[t] * angles[t][k];
+    }
+    vertex_n.resize(nv);
+    // Independent per element, so in parallel (serial, these loops were a good part of the seeds' time).
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nv, 4096), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t v = r.begin(); v != r.end(); ++v) vertex_n[v] = Normal3f(normalized(vertex[v]));
+    });
+  }  // the normals, angles and sums go before the edges' tables come: a big mesh's peak memory is here
+  if (isInterrupted(interrupter)) return;
+  // Edge pseudonormal: the sum of the normals of the triangles that have the edge, in triangle order (a triangle
+  // with the edge twice, a degenerate one, counts twice). Found through each vertex's triangles, listed in triangle
+  // order once each (4 bytes a corner, where sorting every edge use took 16).
+  std::vector<uint32_t> first(nv + 1, 0), around(3 * nt);
+  for (size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t v = corners[t][k];
+      if (!((k > 0 && corners[t][0] == v) || (k > 1 && corners[t][1] == v))) ++first[v + 1];
+    }
+  for (size_t v = 0; v < nv; ++v) first[v + 1] += first[v];
+  {
+    std::vector<uint32_t> next(first.begin(), first.end() - 1);
+    for (size_t t = 0; t < nt; ++t) {
+      if (stop(t)) return;
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t v = corners[t][k];
+        if (!((k > 0 && corners[t][0] == v) || (k > 1 && corners[t][1] == v))) around[next[v]++] = uint32_t(t);
       }
     }
-  });
-  if (isInterrupted(interrupter)) return;
-  tbb::parallel_sort(uses.begin(), uses.end(), [](const EdgeUse& x, const EdgeUse& y) {
-    return x.key < y.key || (x.key == y.key && x.slot < y.slot);
-  });
-  edge_n.resize(3 * nt);
-  for (size_t i = 0; i < uses.size();) {
-    if (stop(i)) return;
-    size_t j = i;
-    Vec3d sum{};
-    while (j < uses.size() && uses[j].key == uses[i].key) sum = sum + face[uses[j++].slot / 3];
-    for (size_t k = i; k < j; ++k) edge_n[uses[k].slot] = Normal3f(normalized(sum));
-    i = j;
   }
+  edge_n.resize(3 * nt);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, nt, 1024), [&](const tbb::blocked_range<size_t>& r) {
+    if (tbb::is_current_task_group_canceling()) return;
+    for (size_t t = r.begin(); t != r.end(); ++t)
+      for (int e = 0; e < 3; ++e) {
+        const uint32_t a = std::min(corners[t][e], corners[t][(e + 1) % 3]);
+        const uint32_t b = std::max(corners[t][e], corners[t][(e + 1) % 3]);
+        Vec3d sum{};
+        for (uint32_t i = first[a]; i < first[a + 1]; ++i) {
+          const auto& c = corners[around[i]];
+          for (int f = 0; f < 3; ++f)
+            if (std::min(c[f], c[(f + 1) % 3]) == a && std::max(c[f], c[(f + 1) % 3]) == b)
+              sum = sum + faceNormal(around[i]);
+        }
+        edge_n[3 * t + e] = Normal3f(normalized(sum));
+      }
+  });
 }
 
 // The distance from each triangle to the nearest vertex of an edge not shared by exactly two triangles, searched in a
