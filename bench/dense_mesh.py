@@ -1,10 +1,14 @@
 #!/usr/bin/env python3
-"""Write a dense triangle mesh for the big-mesh benchmarks: a bundled OFF mesh with every triangle split in four,
---levels times (edge midpoints shared, so a closed mesh stays closed and the surface is unchanged), as binary PLY.
+"""Write a benchmark mesh as binary PLY from a bundled OFF or OBJ mesh: every triangle split in four, --levels times
+(edge midpoints shared, so a closed mesh stays closed and the surface is unchanged), then --holes holes punched in it
+(the triangles whose centroid lies within --hole-radius of the bounding box's diagonal from N triangles' centroids,
+picked with a fixed seed): an open mesh as scans give them.
 
     bench/dense_mesh.py ../shared/data/meshes/armadillo.off --levels 3 --out /tmp/armadillo_3m.ply   # 3.33 M triangles
+    bench/dense_mesh.py ../shared/data/meshes/bunny.obj --levels 0 --holes 8 --out /tmp/bunny_holes.ply
 """
 import argparse
+import random
 import struct
 import sys
 
@@ -25,6 +29,36 @@ def read_off(path):
         triangles.append((int(words[at + 1]), int(words[at + 2]), int(words[at + 3])))
         at += 4
     return vertices, triangles
+
+
+def read_obj(path):
+    vertices, triangles = [], []
+    for line in open(path):
+        w = line.split()
+        if not w:
+            continue
+        if w[0] == "v":
+            vertices.append(tuple(float(x) for x in w[1:4]))
+        elif w[0] == "f":
+            idx = [int(x.split("/")[0]) for x in w[1:]]
+            idx = [i - 1 if i > 0 else len(vertices) + i for i in idx]
+            for k in range(1, len(idx) - 1):  # a fan for polygons
+                triangles.append((idx[0], idx[k], idx[k + 1]))
+    return vertices, triangles
+
+
+def punch_holes(vertices, triangles, holes, radius):
+    lo = [min(v[a] for v in vertices) for a in range(3)]
+    hi = [max(v[a] for v in vertices) for a in range(3)]
+    r = radius * sum((h - l) ** 2 for l, h in zip(lo, hi)) ** 0.5
+
+    def centroid(t):
+        return [sum(vertices[i][a] for i in t) / 3 for a in range(3)]
+
+    rng = random.Random(7)
+    centres = [centroid(triangles[rng.randrange(len(triangles))]) for _ in range(holes)]
+    return [t for t in triangles
+            if all(sum((x - y) ** 2 for x, y in zip(centroid(t), c)) > r * r for c in centres)]
 
 
 def subdivide(vertices, triangles):
@@ -50,11 +84,15 @@ def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("mesh")
     p.add_argument("--levels", type=int, default=3)
+    p.add_argument("--holes", type=int, default=0)
+    p.add_argument("--hole-radius", type=float, default=0.04, help="a fraction of the bounding box's diagonal")
     p.add_argument("--out", required=True)
     a = p.parse_args()
-    vertices, triangles = read_off(a.mesh)
+    vertices, triangles = read_obj(a.mesh) if a.mesh.endswith(".obj") else read_off(a.mesh)
     for _ in range(a.levels):
         vertices, triangles = subdivide(vertices, triangles)
+    if a.holes:
+        triangles = punch_holes(vertices, triangles, a.holes, a.hole_radius)
     with open(a.out, "wb") as f:
         f.write(("ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
                  "property float z\nelement face %d\nproperty list uchar int vertex_indices\nend_header\n"

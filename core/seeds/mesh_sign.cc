@@ -187,10 +187,13 @@ struct MeshSign::Tables {
   std::unique_ptr<WindingNumber> winding;
   std::unique_ptr<ParityScene> parity;
   uint64_t triangles = 0;
-  /// Winding: per triangle, a lower bound on the distance (frame units) from any of its points to the nearest vertex of
-  /// a boundary or non-manifold edge (capped at kFarFromBoundary), the curves the winding number turns around without
-  /// crossing the surface.
-  std::vector<float> boundary_distance;
+  /// Winding: the boundary and non-manifold edges, the curves the winding number turns around without crossing the
+  /// surface, cut into pieces of at most kBoundaryPiece frame units, each filed under the cell of its midpoint.
+  struct BoundaryPiece {
+    Vec3d a, b;
+  };
+  std::vector<BoundaryPiece> boundary_pieces;
+  std::unordered_map<Coord, std::vector<uint32_t>, CoordHash> boundary_cells;
   /// Winding: each triangle's connected part (findMeshParts), empty when the mesh is one part. Parts may cross or nest,
   /// so the certificate takes a brick only when all its voxels' closest triangles belong to one part.
   std::vector<uint32_t> part;
@@ -220,8 +223,11 @@ struct MeshSign::Tables {
   }
 
   void buildPseudonormals(const Interrupter* interrupter);
-  void buildBoundaryDistances();
+  void buildBoundaryPieces();
   std::once_flag boundary_once;
+  /// A lower bound on the distance (frame units) from every point within `radius` of p to the boundary curves;
+  /// kFarFromBoundary when the mesh has none.
+  double boundaryDistance(const Vec3d& p, double radius) const;
   bool signWindingCertified(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
                             const Vec3d& scale) const;
 };
@@ -301,13 +307,27 @@ void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
   });
 }
 
-// The distance from each triangle to the nearest vertex of an edge not shared by exactly two triangles, searched in a
-// hash grid of those vertices ring by ring out to kBoundarySearchCells cells; a triangle with none that near gets
-// the searched reach, a lower bound, as the certificate needs. Built on the first signed brick, so in the grid's
-// index frame, where a cell is 16 voxels.
-void MeshSign::Tables::buildBoundaryDistances() {
-  constexpr double kCell = 16;
-  constexpr int kBoundarySearchCells = 8;
+// The boundary curves in the grid's index frame (built on the first signed brick), cut into pieces no longer than
+// half a cell so that a piece lies within a quarter cell of the midpoint it is filed under; a query searches the
+// cells within kBoundaryRings of its own and bounds everything farther by the rings' reach. Distances are to the
+// edges themselves: a long boundary edge passes far from its vertices.
+constexpr double kBoundaryCell = 32, kBoundaryPiece = kBoundaryCell / 2;
+constexpr int kBoundaryRings = 2;
+constexpr size_t kBoundaryBrutePieces = 256;  // this few: every query reads them all, exactly, without a cap
+
+Coord boundaryCellOf(const Vec3d& p) {
+  return {int(std::floor(p.x / kBoundaryCell)), int(std::floor(p.y / kBoundaryCell)),
+          int(std::floor(p.z / kBoundaryCell))};
+}
+
+double segmentDistance2(const Vec3d& p, const Vec3d& a, const Vec3d& b) {
+  const Vec3d ab = b - a;
+  const double len2 = ab.lengthSqr();
+  const double t = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
+  return (p - (a + ab * t)).lengthSqr();
+}
+
+void MeshSign::Tables::buildBoundaryPieces() {
   const size_t nt = corners.size();
   std::vector<uint64_t> edges(3 * nt);
   tbb::parallel_for(size_t(0), nt, [&](size_t t) {
@@ -317,73 +337,42 @@ void MeshSign::Tables::buildBoundaryDistances() {
     }
   });
   tbb::parallel_sort(edges.begin(), edges.end());
-  std::vector<uint32_t> open;  // vertices of boundary and non-manifold edges
   for (size_t i = 0; i < edges.size();) {
     size_t j = i;
     while (j < edges.size() && edges[j] == edges[i]) ++j;
-    if (j - i != 2) open.insert(open.end(), {uint32_t(edges[i] >> 32), uint32_t(edges[i] & 0xFFFFFFFFu)});
+    if (j - i != 2) {  // a boundary edge (one use) or a non-manifold one (three or more)
+      const Vec3d a = verts[edges[i] >> 32], b = verts[edges[i] & 0xFFFFFFFFu];
+      const int n = std::max(1, int(std::ceil((b - a).length() / kBoundaryPiece)));
+      for (int k = 0; k < n; ++k)
+        boundary_pieces.push_back({a + (b - a) * (double(k) / n), a + (b - a) * (double(k + 1) / n)});
+    }
     i = j;
   }
-  std::vector<uint64_t>().swap(edges);
-  boundary_distance.assign(nt, kFarFromBoundary);
-  if (open.empty()) return;
-  std::sort(open.begin(), open.end());
-  open.erase(std::unique(open.begin(), open.end()), open.end());
-  auto cellOf = [](const Vec3d& p, double size) {
-    return Coord{int(std::floor(p.x / size)), int(std::floor(p.y / size)), int(std::floor(p.z / size))};
-  };
-  std::unordered_map<Coord, std::vector<Vec3d>, CoordHash> cells;
-  for (uint32_t v : open) cells[cellOf(verts[v], kCell)].push_back(verts[v]);
-  // One search per brick-sized box that holds a triangle's centroid (a thin band's surface has far fewer of those
-  // than triangles): the distance from the box to the nearest open vertex bounds it from every centroid inside.
-  constexpr double kBox = 8;
-  std::vector<Coord> boxes(nt);
-  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
-    const auto& c = corners[t];
-    boxes[t] = cellOf((verts[c[0]] + verts[c[1]] + verts[c[2]]) * (1.0 / 3.0), kBox);
-  });
-  std::vector<Coord> unique_boxes = boxes;
-  auto less = [](const Coord& a, const Coord& b) { return std::tie(a.z, a.y, a.x) < std::tie(b.z, b.y, b.x); };
-  tbb::parallel_sort(unique_boxes.begin(), unique_boxes.end(), less);
-  unique_boxes.erase(std::unique(unique_boxes.begin(), unique_boxes.end()), unique_boxes.end());
-  std::vector<double> box_distance(unique_boxes.size());
-  tbb::parallel_for(size_t(0), unique_boxes.size(), [&](size_t b) {
-    const Vec3d lo{unique_boxes[b].x * kBox, unique_boxes[b].y * kBox, unique_boxes[b].z * kBox};
-    const Vec3d centre = lo + Vec3d{kBox / 2, kBox / 2, kBox / 2};
-    auto toBox2 = [&](const Vec3d& q) {
-      const double dx = std::max({lo.x - q.x, 0.0, q.x - lo.x - kBox});
-      const double dy = std::max({lo.y - q.y, 0.0, q.y - lo.y - kBox});
-      const double dz = std::max({lo.z - q.z, 0.0, q.z - lo.z - kBox});
-      return dx * dx + dy * dy + dz * dz;
-    };
-    const Coord home = cellOf(centre, kCell);
-    double best2 = std::numeric_limits<double>::infinity();
-    for (int ring = 0; ring <= kBoundarySearchCells; ++ring) {
-      // Every cell of the ring lies at least (ring - 1) cells from the home cell, which holds the box's centre:
-      // at least (ring - 1) kCell - kBox / 2 from the box. Stop once that exceeds the best found.
-      const double reach = std::max(0.0, (ring - 1) * kCell - kBox / 2);
-      if (reach * reach > best2) break;
-      for (int z = -ring; z <= ring; ++z)
-        for (int y = -ring; y <= ring; ++y) {
-          const bool shell = std::abs(z) == ring || std::abs(y) == ring;
-          for (int x = -ring; x <= ring; x += shell ? 1 : std::max(1, 2 * ring)) {
-            const auto it = cells.find(Coord{home.x + x, home.y + y, home.z + z});
-            if (it == cells.end()) continue;
-            for (const Vec3d& q : it->second) best2 = std::min(best2, toBox2(q));
-          }
+  if (boundary_pieces.size() <= kBoundaryBrutePieces) return;
+  for (size_t k = 0; k < boundary_pieces.size(); ++k)
+    boundary_cells[boundaryCellOf((boundary_pieces[k].a + boundary_pieces[k].b) * 0.5)].push_back(uint32_t(k));
+}
+
+double MeshSign::Tables::boundaryDistance(const Vec3d& p, double radius) const {
+  if (boundary_pieces.empty()) return kFarFromBoundary;
+  double best2 = std::numeric_limits<double>::infinity();
+  double cap = std::numeric_limits<double>::infinity();
+  if (boundary_cells.empty()) {
+    for (const BoundaryPiece& piece : boundary_pieces) best2 = std::min(best2, segmentDistance2(p, piece.a, piece.b));
+  } else {
+    const Coord home = boundaryCellOf(p);
+    for (int z = -kBoundaryRings; z <= kBoundaryRings; ++z)
+      for (int y = -kBoundaryRings; y <= kBoundaryRings; ++y)
+        for (int x = -kBoundaryRings; x <= kBoundaryRings; ++x) {
+          const auto it = boundary_cells.find(Coord{home.x + x, home.y + y, home.z + z});
+          if (it == boundary_cells.end()) continue;
+          for (uint32_t k : it->second)
+            best2 = std::min(best2, segmentDistance2(p, boundary_pieces[k].a, boundary_pieces[k].b));
         }
-    }
-    // Nothing within the searched rings: every vertex found later would be at least this far from the box.
-    box_distance[b] = std::min(std::sqrt(best2), kBoundarySearchCells * kCell - kBox);
-  });
-  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
-    const auto& c = corners[t];
-    const Vec3d p = (verts[c[0]] + verts[c[1]] + verts[c[2]]) * (1.0 / 3.0);
-    double reach = 0;  // so that the bound holds from any point of the triangle, not only its centroid
-    for (int k = 0; k < 3; ++k) reach = std::max(reach, (verts[c[k]] - p).length());
-    const size_t b = std::lower_bound(unique_boxes.begin(), unique_boxes.end(), boxes[t], less) - unique_boxes.begin();
-    boundary_distance[t] = float(box_distance[b] - reach);
-  });
+    // A piece not searched has its midpoint kBoundaryRings cells away or more, and lies within half a piece of it.
+    cap = kBoundaryRings * kBoundaryCell - kBoundaryPiece / 2;
+  }
+  return std::max(0.0, std::min(std::sqrt(best2), cap) - radius);
 }
 
 // Winding signs at the pseudonormal's price where that is provably the same answer. Across a consistently oriented
@@ -406,7 +395,7 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites,
   };
   int ref = -1, n = 0;
   uint32_t brick_part = 0;
-  double ref_to_center = std::numeric_limits<double>::infinity(), boundary = kFarFromBoundary;
+  double ref_to_center = std::numeric_limits<double>::infinity();
   Vec3d normal{};
   const Vec3d center{(brick.origin.x + 3.5) * scale.x, (brick.origin.y + 3.5) * scale.y, (brick.origin.z + 3.5) * scale.z};
   for (int w = 0; w < kBrickVoxels / 64; ++w)
@@ -418,11 +407,13 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites,
       if (n++ == 0) normal = tn, brick_part = part.empty() ? 0 : part[t];
       if (normal.dot(tn) <= 0) return false;                     // thin parts: opposite sheets in one brick
       if (!part.empty() && part[t] != brick_part) return false;  // sheets of two parts
-      boundary = std::min(boundary, boundary_distance[t] - std::abs(brick.values[i]) / voxel_size);
       const double c2 = (at(i) - center).lengthSqr();
       if (c2 < ref_to_center) ref_to_center = c2, ref = i;
     }
-  if (ref < 0 || boundary <= 0) return false;
+  if (ref < 0) return false;
+  // Every point of the brick's box is at least this far from the boundary curves.
+  const double boundary = boundaryDistance(center, 3.5 * std::sqrt(scale.lengthSqr()));
+  if (boundary <= 0) return false;
   double spread2 = 0;  // the farthest voxel from the reference
   for (int w = 0; w < kBrickVoxels / 64; ++w)
     for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1)
@@ -558,7 +549,8 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   }
   if (method_ == SignMethod::kWinding) {
     // Isolated: a thread that waits for the build inside it must not pick up another brick's task meanwhile.
-    std::call_once(tables_->boundary_once, [&] { tbb::this_task_arena::isolate([&] { tables_->buildBoundaryDistances(); }); });
+    std::call_once(tables_->boundary_once,
+                   [&] { tbb::this_task_arena::isolate([&] { tables_->buildBoundaryPieces(); }); });
     if (s.signWindingCertified(brick, sites, site_triangle, voxel_size, scale)) return {0, brick.mask.count(), 0, 0};
   }
   // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
@@ -574,6 +566,12 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     double drift;  // winding: the turn per unit of distance from c
   };
   std::vector<Ball> balls;
+  // Winding: every voxel of the brick (and the path between two of them) is at least this far from the boundary.
+  const double brick_boundary =
+      method_ == SignMethod::kWinding
+          ? s.boundaryDistance(unitsOf(brick.origin) + Vec3d{3.5 * scale.x, 3.5 * scale.y, 3.5 * scale.z},
+                               3.5 * std::sqrt(scale.lengthSqr()))
+          : 0.0;
   for (int i = 0; i < kBrickVoxels; ++i) {
     if (!brick.mask.test(i)) continue;
     const Vec3d p = unitsOf(brick.origin + brickLocal(i));
@@ -592,7 +590,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
       if (method_ == SignMethod::kWinding) {
         const double w = s.winding->query(p);
         in = w > 0.5;
-        const double boundary = sites[i] == kNoSite ? 0 : s.boundary_distance[triangleOf(sites[i])] - dist;
+        const double boundary = sites[i] == kNoSite ? 0 : brick_boundary;
         if (r > 0 && boundary > 0)
           balls.push_back({p, r * r, in, std::abs(w - 0.5) - kWindingQueryError, 1.0 / (std::numbers::pi * boundary)});
       } else {
@@ -611,7 +609,9 @@ uint64_t MeshSign::memoryBytes() const {
   uint64_t bytes = sizeof(MeshSign) + sizeof(Tables) + t.verts.capacity() * sizeof(Vec3d) +
                    t.corners.capacity() * sizeof(t.corners[0]) +
                    (t.face_n.capacity() + t.edge_n.capacity() + t.vertex_n.capacity()) * sizeof(Normal3f) +
-                   t.boundary_distance.capacity() * sizeof(float) + t.part.capacity() * sizeof(uint32_t);
+                   t.boundary_pieces.capacity() * sizeof(Tables::BoundaryPiece) +
+                   t.boundary_cells.size() * (sizeof(Coord) + 2 * sizeof(void*) + sizeof(std::vector<uint32_t>)) +
+                   t.boundary_pieces.size() * sizeof(uint32_t) + t.part.capacity() * sizeof(uint32_t);
   if (t.winding) bytes += t.winding->memoryBytes();
   if (t.parity) bytes += estimateBytes(SignMethod::kParity, 0, t.triangles);
   return bytes;
