@@ -620,10 +620,10 @@ uint64_t MeshSign::memoryBytes() const {
 uint64_t MeshSign::estimateBytes(SignMethod method, uint64_t vertices, uint64_t triangles) {
   switch (method) {
     case SignMethod::kPseudonormal:
-      // Kept: vertices, corners and normals; while building: face normals, angles, vertex sums and edge uses.
+      // Kept: vertices, corners and normals; while building, first face normals, angles and vertex sums, then (after
+      // those are freed) each vertex's triangles, a third of that.
       return vertices * (sizeof(Vec3d) * 2 + sizeof(Normal3f)) +
-             triangles * (sizeof(std::array<uint32_t, 3>) + 4 * sizeof(Normal3f) + sizeof(Vec3d) +
-                          3 * sizeof(double) + 3 * 16);
+             triangles * (sizeof(std::array<uint32_t, 3>) + 4 * sizeof(Normal3f) + sizeof(Vec3d) + 3 * sizeof(double));
     case SignMethod::kWinding:
       // The triangles, twice while the tree is built, about two nodes per leaf of a few triangles, and each
       // triangle's part.
