@@ -173,6 +173,17 @@ struct Normal3f {
 bool planeDecides(double plane, double dist) { return plane * plane >= dist * dist * (1 - 1e-5); }
 
 constexpr float kFarFromBoundary = 1e6f;  // frame units: no boundary anywhere near
+
+// The voxels of each 4^3 octant of a brick (octant o: x, y, z halves from bits 0, 1, 2).
+constexpr std::array<BrickMask, 8> makeOctants() {
+  std::array<BrickMask, 8> m{};
+  for (int i = 0; i < kBrickVoxels; ++i) {
+    const Coord c = brickLocal(i);
+    m[size_t((c.x >> 2) | (c.y >> 2) << 1 | (c.z >> 2) << 2)].words[size_t(i >> 6)] |= uint64_t(1) << (i & 63);
+  }
+  return m;
+}
+constexpr std::array<BrickMask, 8> kOctants = makeOctants();
 // The winding hierarchy's error bound (kThirdOrderTolerance per cluster, core/mesh/winding_number.cc; measured below
 // 0.011 near open meshes) with room to spare.
 constexpr double kWindingQueryError = 0.03;
@@ -228,7 +239,10 @@ struct MeshSign::Tables {
   /// A lower bound on the distance (frame units) from every point within `radius` of p to the boundary curves;
   /// kFarFromBoundary when the mesh has none.
   double boundaryDistance(const Vec3d& p, double radius) const;
-  bool signWindingCertified(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
+  /// Signs the voxels of `subset` (delivered voxels of the brick, all within `radius` frame units of `center`) with
+  /// one winding query when that provably agrees with the exact winding number (below); false, nothing signed, else.
+  bool signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
+                            const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
                             const Vec3d& scale) const;
 };
 
@@ -386,8 +400,9 @@ double MeshSign::Tables::boundaryDistance(const Vec3d& p, double radius) const {
 // with the same orientation: a voxel in front of one sheet can lie behind the other, which no single w0 describes)
 // also send the brick to the per-voxel queries. Not covered: one connected part that crosses itself, or stacks two
 // sheets of the same orientation, within a brick.
-bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites, const uint32_t* site_triangle,
-                                            double voxel_size, const Vec3d& scale) const {
+bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
+                                            const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
+                                            const Vec3d& scale) const {
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
   const auto at = [&](int i) {
     const Coord c = brick.origin + brickLocal(i);
@@ -395,13 +410,13 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites,
   };
   int ref = -1, n = 0;
   uint32_t brick_part = 0;
-  double ref_to_center = std::numeric_limits<double>::infinity();
+  double ref_to_center = std::numeric_limits<double>::infinity(), farthest = 0;
   Vec3d normal{};
-  const Vec3d center{(brick.origin.x + 3.5) * scale.x, (brick.origin.y + 3.5) * scale.y, (brick.origin.z + 3.5) * scale.z};
   for (int w = 0; w < kBrickVoxels / 64; ++w)
-    for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1) {
+    for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
       const int i = w * 64 + std::countr_zero(bits);
       if (sites[i] == kNoSite) return false;
+      farthest = std::max(farthest, double(std::abs(brick.values[i])) / voxel_size);
       const uint32_t t = triangleOf(sites[i]);
       const Vec3d tn{face_n[t].x, face_n[t].y, face_n[t].z};
       if (n++ == 0) normal = tn, brick_part = part.empty() ? 0 : part[t];
@@ -411,12 +426,14 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites,
       if (c2 < ref_to_center) ref_to_center = c2, ref = i;
     }
   if (ref < 0) return false;
-  // Every point of the brick's box is at least this far from the boundary curves.
-  const double boundary = boundaryDistance(center, 3.5 * std::sqrt(scale.lengthSqr()));
-  if (boundary <= 0) return false;
+  // Every point of the subset's box is at least this far from the boundary curves. Farther than every voxel's
+  // distance to the surface, no voxel's closest point lies on a boundary edge, where "behind the pseudonormal" need not
+  // mean across the sheet (beyond a rim, behind the face's plane, the winding number has not jumped).
+  const double boundary = boundaryDistance(center, radius);
+  if (boundary <= farthest) return false;
   double spread2 = 0;  // the farthest voxel from the reference
   for (int w = 0; w < kBrickVoxels / 64; ++w)
-    for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1)
+    for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1)
       spread2 = std::max(spread2, (at(w * 64 + std::countr_zero(bits)) - at(ref)).lengthSqr());
   // Off the sheets the winding number turns around a straight boundary edge like theta / (2 pi): by at most
   // spread / (2 pi boundary) over the brick; twice that for curved and several curves.
@@ -426,7 +443,7 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const uint32_t* sites,
   const double w0 = winding->query(at(ref)) - (ref_behind ? 1.0 : 0.0);  // the front side's value
   if (std::abs(w0) + drift + kWindingQueryError >= 0.5) return false;
   for (int w = 0; w < kBrickVoxels / 64; ++w)
-    for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1) {
+    for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
       const int i = w * 64 + std::countr_zero(bits);
       if (i == ref ? ref_behind
                    : insidePseudonormal(at(i), triangleOf(sites[i]), std::abs(brick.values[i]) / voxel_size))
@@ -547,11 +564,32 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     });
     return {brick.mask.count(), 0, 0, 0};
   }
+  BrickMask todo = brick.mask;  // the voxels still to sign
+  int64_t certified = 0;        // signed by a certificate
   if (method_ == SignMethod::kWinding) {
     // Isolated: a thread that waits for the build inside it must not pick up another brick's task meanwhile.
     std::call_once(tables_->boundary_once,
                    [&] { tbb::this_task_arena::isolate([&] { tables_->buildBoundaryPieces(); }); });
-    if (s.signWindingCertified(brick, sites, site_triangle, voxel_size, scale)) return {0, brick.mask.count(), 0, 0};
+    auto boxCenter = [&](const Coord& lo, double half) {  // of the voxels lo .. lo + 2 half, in frame units
+      return Vec3d{(lo.x + half) * scale.x, (lo.y + half) * scale.y, (lo.z + half) * scale.z};
+    };
+    const Vec3d brick_center = boxCenter(brick.origin, 3.5);
+    if (s.signWindingCertified(brick, brick.mask, brick_center, 3.5 * std::sqrt(scale.lengthSqr()), sites,
+                               site_triangle, voxel_size, scale))
+      return {0, brick.mask.count(), 0, 0};
+    // Refused whole (near a hole, a sharp edge, where parts meet): each 4^3 octant on its own, with half the spread
+    // and, nearer the boundary, half the box, before any voxel takes a query of its own.
+    for (int o = 0; o < 8; ++o) {
+      BrickMask octant;
+      for (int w = 0; w < kBrickVoxels / 64; ++w) octant.words[w] = todo.words[w] & kOctants[o].words[w];
+      if (octant.empty()) continue;
+      const Vec3d c = boxCenter(brick.origin + Coord{4 * (o & 1), 2 * (o & 2), o & 4}, 1.5);
+      if (!s.signWindingCertified(brick, octant, c, 1.5 * std::sqrt(scale.lengthSqr()), sites, site_triangle,
+                                  voxel_size, scale))
+        continue;
+      certified += octant.count();
+      for (int w = 0; w < kBrickVoxels / 64; ++w) todo.words[w] &= ~octant.words[w];
+    }
   }
   // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
   // surface. A voxel's distance to the surface is a ball around it that no surface crosses: parity is constant there,
@@ -573,7 +611,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
                                3.5 * std::sqrt(scale.lengthSqr()))
           : 0.0;
   for (int i = 0; i < kBrickVoxels; ++i) {
-    if (!brick.mask.test(i)) continue;
+    if (!todo.test(i)) continue;
     const Vec3d p = unitsOf(brick.origin + brickLocal(i));
     bool in = false;
     bool found = false;
@@ -600,8 +638,8 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     }
     if (in) brick.values[i] = -std::abs(brick.values[i]);
   }
-  const int64_t n = brick.mask.count();
-  return method_ == SignMethod::kWinding ? SignShares{0, 0, n, 0} : SignShares{0, 0, 0, n};
+  const int64_t n = todo.count();
+  return method_ == SignMethod::kWinding ? SignShares{0, certified, n, 0} : SignShares{0, 0, 0, n};
 }
 
 uint64_t MeshSign::memoryBytes() const {

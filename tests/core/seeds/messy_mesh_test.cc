@@ -68,7 +68,8 @@ Grid gridOf(const TriangleMesh& mesh, int resolution = kResolution) {
 }
 
 Computed compute(TriangleMesh raw, SignMethod requested = SignMethod::kAuto,
-                 std::optional<StencilKind> stencil = std::nullopt, int resolution = kResolution) {
+                 std::optional<StencilKind> stencil = std::nullopt, int resolution = kResolution,
+                 double limit_voxels = kLimitVoxels) {
   Computed c;
   EXPECT_TRUE(IsOk(validateMesh(&raw, &c.report)));
   c.mesh = std::move(raw);
@@ -76,12 +77,12 @@ Computed compute(TriangleMesh raw, SignMethod requested = SignMethod::kAuto,
   c.grid = gridOf(c.mesh, resolution);
   MeshSeedOptions so;
   so.sign = c.sign;
-  so.limit_voxels = kLimitVoxels;
+  so.limit_voxels = limit_voxels;
   Seeds seeds;
   EXPECT_TRUE(IsOk(makeMeshSeeds(c.grid, c.mesh, so, &seeds)));
   BandOptions eo;  // exact mode, the default stencil unless asked
   eo.stencil = stencil;
-  eo.limit_world = kLimitVoxels * c.grid.voxelSize();
+  eo.limit_world = limit_voxels * c.grid.voxelSize();
   DenseField field(c.grid, std::numeric_limits<float>::quiet_NaN());
   computeBandField(c.grid, seeds, eo, [&](SegmentBricks&& s) { field.add(s); });
   c.field = std::move(field.values());
@@ -466,6 +467,17 @@ TEST(MessyMeshTest, AnOpenBoxOfBigTrianglesIsSignedByTheWindingNumber) {
   EXPECT_EQ(c.report.boundary_edges, 4) << c.report.summary();
   EXPECT_EQ(c.sign, SignMethod::kWinding) << c.reason;
   expectContract("open box of big triangles", c, checkAgainstBruteForce(c));
+}
+
+// The same box with a band of 16 voxels (the other cases use 3): voxels beyond the rim lie behind the plane of the
+// wall whose rim edge is their closest feature, yet on the same side of the sheet as the voxels in front of it (the
+// winding number has not jumped there), and the certificates' boxes reach farther from the surface.
+TEST(MessyMeshTest, BeyondTheRimOfAnOpenBoxAWideBandIsSignedByTheWindingNumber) {
+  TriangleMesh box = makeBoxMesh(kCentre - Vec3d{1, 1, 1}, kCentre + Vec3d{1, 1, 1});
+  std::erase_if(box.triangles, [&](const auto& t) { return centroid(box, t).z > kCentre.z + 0.99; });
+  const Computed c = compute(box, SignMethod::kAuto, std::nullopt, 160, 16);
+  EXPECT_EQ(c.sign, SignMethod::kWinding) << c.reason;
+  expectContract("open box, band of 16 voxels", c, checkAgainstBruteForce(c));
 }
 
 }  // namespace
