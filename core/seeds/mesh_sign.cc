@@ -285,21 +285,21 @@ void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
   // Edge pseudonormal: the sum of the normals of the triangles that have the edge, in triangle order (a triangle
   // with the edge twice, a degenerate one, counts twice). Found through each vertex's triangles, listed in triangle
   // order once each (4 bytes a corner, where sorting every edge use took 16).
+  auto firstUse = [&](size_t t, int k) {  // corner k is the first of triangle t at its vertex
+    const uint32_t v = corners[t][k];
+    return !((k > 0 && corners[t][0] == v) || (k > 1 && corners[t][1] == v));
+  };
   std::vector<uint32_t> first(nv + 1, 0), around(3 * nt);
   for (size_t t = 0; t < nt; ++t)
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t v = corners[t][k];
-      if (!((k > 0 && corners[t][0] == v) || (k > 1 && corners[t][1] == v))) ++first[v + 1];
-    }
+    for (int k = 0; k < 3; ++k)
+      if (firstUse(t, k)) ++first[corners[t][k] + 1];
   for (size_t v = 0; v < nv; ++v) first[v + 1] += first[v];
   {
     std::vector<uint32_t> next(first.begin(), first.end() - 1);
     for (size_t t = 0; t < nt; ++t) {
       if (stop(t)) return;
-      for (int k = 0; k < 3; ++k) {
-        const uint32_t v = corners[t][k];
-        if (!((k > 0 && corners[t][0] == v) || (k > 1 && corners[t][1] == v))) around[next[v]++] = uint32_t(t);
-      }
+      for (int k = 0; k < 3; ++k)
+        if (firstUse(t, k)) around[next[corners[t][k]]++] = uint32_t(t);
     }
   }
   edge_n.resize(3 * nt);
@@ -566,6 +566,8 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   }
   BrickMask todo = brick.mask;  // the voxels still to sign
   int64_t certified = 0;        // signed by a certificate
+  // Winding: every voxel of the brick (and the path between two of them) is at least this far from the boundary.
+  double brick_boundary = 0;
   if (method_ == SignMethod::kWinding) {
     // Isolated: a thread that waits for the build inside it must not pick up another brick's task meanwhile.
     std::call_once(tables_->boundary_once,
@@ -574,8 +576,8 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
       return Vec3d{(lo.x + half) * scale.x, (lo.y + half) * scale.y, (lo.z + half) * scale.z};
     };
     const Vec3d brick_center = boxCenter(brick.origin, 3.5);
-    if (s.signWindingCertified(brick, brick.mask, brick_center, 3.5 * std::sqrt(scale.lengthSqr()), sites,
-                               site_triangle, voxel_size, scale))
+    const double brick_radius = 3.5 * std::sqrt(scale.lengthSqr());
+    if (s.signWindingCertified(brick, brick.mask, brick_center, brick_radius, sites, site_triangle, voxel_size, scale))
       return {0, brick.mask.count(), 0, 0};
     // Refused whole (near a hole, a sharp edge, where parts meet): each 4^3 octant on its own, with half the spread
     // and, nearer the boundary, half the box, before any voxel takes a query of its own.
@@ -590,6 +592,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
       certified += octant.count();
       for (int w = 0; w < kBrickVoxels / 64; ++w) todo.words[w] &= ~octant.words[w];
     }
+    if (!todo.empty()) brick_boundary = s.boundaryDistance(brick_center, brick_radius);
   }
   // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
   // surface. A voxel's distance to the surface is a ball around it that no surface crosses: parity is constant there,
@@ -604,12 +607,6 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     double drift;  // winding: the turn per unit of distance from c
   };
   std::vector<Ball> balls;
-  // Winding: every voxel of the brick (and the path between two of them) is at least this far from the boundary.
-  const double brick_boundary =
-      method_ == SignMethod::kWinding
-          ? s.boundaryDistance(unitsOf(brick.origin) + Vec3d{3.5 * scale.x, 3.5 * scale.y, 3.5 * scale.z},
-                               3.5 * std::sqrt(scale.lengthSqr()))
-          : 0.0;
   for (int i = 0; i < kBrickVoxels; ++i) {
     if (!todo.test(i)) continue;
     const Vec3d p = unitsOf(brick.origin + brickLocal(i));

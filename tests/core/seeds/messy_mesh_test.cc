@@ -460,10 +460,15 @@ TEST(MessyMeshTest, ACupIsSignedByTheWindingNumber) {
 // edges 350 voxels long with vertices only at the corners, so the voxels along the middle of the rim are far from
 // every boundary vertex but next to the boundary curve, around which the winding number turns. Bricks there must not
 // be signed by their pseudonormals on the strength of one winding query (the certificate's bound on the turn).
-TEST(MessyMeshTest, AnOpenBoxOfBigTrianglesIsSignedByTheWindingNumber) {
+// A cube of two-triangle faces around kCentre without its top face.
+TriangleMesh openBox() {
   TriangleMesh box = makeBoxMesh(kCentre - Vec3d{1, 1, 1}, kCentre + Vec3d{1, 1, 1});
   std::erase_if(box.triangles, [&](const auto& t) { return centroid(box, t).z > kCentre.z + 0.99; });
-  const Computed c = compute(box, SignMethod::kAuto, std::nullopt, 400);
+  return box;
+}
+
+TEST(MessyMeshTest, AnOpenBoxOfBigTrianglesIsSignedByTheWindingNumber) {
+  const Computed c = compute(openBox(), SignMethod::kAuto, std::nullopt, 400);
   EXPECT_EQ(c.report.boundary_edges, 4) << c.report.summary();
   EXPECT_EQ(c.sign, SignMethod::kWinding) << c.reason;
   expectContract("open box of big triangles", c, checkAgainstBruteForce(c));
@@ -473,9 +478,7 @@ TEST(MessyMeshTest, AnOpenBoxOfBigTrianglesIsSignedByTheWindingNumber) {
 // wall whose rim edge is their closest feature, yet on the same side of the sheet as the voxels in front of it (the
 // winding number has not jumped there), and the certificates' boxes reach farther from the surface.
 TEST(MessyMeshTest, BeyondTheRimOfAnOpenBoxAWideBandIsSignedByTheWindingNumber) {
-  TriangleMesh box = makeBoxMesh(kCentre - Vec3d{1, 1, 1}, kCentre + Vec3d{1, 1, 1});
-  std::erase_if(box.triangles, [&](const auto& t) { return centroid(box, t).z > kCentre.z + 0.99; });
-  const Computed c = compute(box, SignMethod::kAuto, std::nullopt, 160, 16);
+  const Computed c = compute(openBox(), SignMethod::kAuto, std::nullopt, 160, 16);
   EXPECT_EQ(c.sign, SignMethod::kWinding) << c.reason;
   expectContract("open box, band of 16 voxels", c, checkAgainstBruteForce(c));
 }
