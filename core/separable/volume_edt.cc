@@ -172,6 +172,14 @@ struct WholeGridSource : WholeGridBricks {
   }
 };
 
+/// A band's bricks in (z, y, x) order: the union of the listed bricks (Grid::brickIndex) and their cells, or null.
+template <class C, class Inside>
+struct BandBricks {
+  std::vector<uint64_t> keys;
+  std::vector<const C*> outside;
+  std::vector<const Inside*> inside;
+};
+
 /// The voxels within the limit, from the band's bricks: the seed field's outside voxels from `outside`, its seeds 0
 /// (signed: minus their distance from `inside`); the multi-label EDT's labelled voxels from `outside`, label 0 at 0.
 template <class C, class Inside, class T, bool kMulti>
@@ -181,26 +189,26 @@ struct BandSource {
   bool inside_negative;
   const T* labels;
   typename CellOps<C>::Dist cut2;
-  std::vector<uint64_t> keys;                   // the union of the listed bricks (Grid::brickIndex), ascending
-  std::vector<const C*> outside;                // their cells, or null
-  std::vector<const Inside*> inside;
-  size_t count() const { return keys.size(); }
-  Coord origin(size_t i) const { return grid.brickOrigin(int64_t(keys[i])); }
+  const BandBricks<C, Inside>& bricks;
+  size_t count() const { return bricks.keys.size(); }
+  Coord origin(size_t i) const { return grid.brickOrigin(int64_t(bricks.keys[i])); }
   bool value(size_t i, int off, const Coord& c, double* d) const {
     if (!grid.contains(c)) return false;
     const bool labelled = labels[size_t(grid.denseIndex(c))] != 0;
     if (kMulti ? !labelled : labelled) {
       if (kMulti || !inside_negative) return *d = 0, true;
       // A seed of a signed field.
-      if (!inside[i] || CellOps<Inside>::dist(inside[i][off]) > cut2) return false;
-      return *d = -std::sqrt(double(CellOps<Inside>::dist(inside[i][off]))), true;
+      const Inside* in = bricks.inside[i];
+      if (!in || CellOps<Inside>::dist(in[off]) > cut2) return false;
+      return *d = -std::sqrt(double(CellOps<Inside>::dist(in[off]))), true;
     }
-    if (!outside[i] || CellOps<C>::dist(outside[i][off]) > cut2) return false;
-    return *d = std::sqrt(double(CellOps<C>::dist(outside[i][off]))), true;
+    const C* out = bricks.outside[i];
+    if (!out || CellOps<C>::dist(out[off]) > cut2) return false;
+    return *d = std::sqrt(double(CellOps<C>::dist(out[off]))), true;
   }
   int64_t feature(size_t i, int off, const Coord& c) const {
     const uint32_t label = labels[size_t(grid.denseIndex(c))];
-    return label ? int64_t(label) : int64_t(CellOps<C>::label(outside[i][off]));
+    return label ? int64_t(label) : int64_t(CellOps<C>::label(bricks.outside[i][off]));
   }
 };
 
@@ -227,32 +235,53 @@ class CellsRun {
     w2_[2] = s.z * s.z;
   }
 
-  /// False when interrupted. Near field first: when the field has more than one segment, segment 0 comes from the
-  /// band within its bound (it follows the boundary), then the rest from the whole grid or the band within the limit —
-  /// so a client gets near voxels after a fraction of the work instead of after all of it. The band works in whole
-  /// bricks, so within a limit of a few bricks the first segment's band costs nearly the limit's: there it is
-  /// skipped (docs/benchmarks.md, service_bench).
+  /// False when interrupted. Near field first, so a client gets near voxels after a fraction of the work instead of
+  /// after all of it:
+  ///   * with a limit, when the client takes chunks, the band is computed in two parts along z: the first few layers
+  ///     that hold a boundary (a few percent of the band's work), whose near segment is streamed at once, then the
+  ///     rest; what the parts' passes read twice is bounded by the first part's work. Later segments then come from
+  ///     both parts.
+  ///   * otherwise, when the field has more than one segment, segment 0 comes from the band within its bound (it
+  ///     follows the boundary), then the rest from the whole grid or the band within the limit. The band works in
+  ///     whole bricks, so within a limit of a few bricks the first segment's band costs nearly the limit's: there it
+  ///     is skipped (docs/benchmarks.md, service_bench).
   bool run() {
+    using Dist = typename CellOps<C>::Dist;
     const double h = grid_.voxelSize();
     const double segment = options_.segment_length_world / h, limit = options_.limit_world / h;  // units
+    const bool one_segment = !(segment > 0 && limit > segment);
+    if (!std::isinf(limit) && options_.max_chunk_bricks > 0) {
+      if (!classify()) return false;
+      return emitLimitInParts(squaredCut<Dist>(limit));
+    }
     auto reachBricks = [](double units) { return std::ceil(std::floor(units) / kBrickSize); };
-    const bool near_first =
-        segment > 0 && limit > segment && (std::isinf(limit) || reachBricks(limit) >= 4 * reachBricks(segment));
+    const bool near_first = !one_segment && (std::isinf(limit) || reachBricks(limit) >= 4 * reachBricks(segment));
     SegmentWindow rest;
     if (near_first) {
       if (!classify()) return false;
       // A little past the segment's bound, so rounding in the sqrt cannot drop one of its voxels (the emission keeps
       // only segment 0's).
-      using Dist = typename CellOps<C>::Dist;
-      if (!emitWithin(squaredCut<Dist>(segment * (1 + 1e-6)), SegmentWindow{0, 0})) return false;
+      BandPart near;
+      const Dist cut2 = squaredCut<Dist>(segment * (1 + 1e-6));
+      if (!bandWithin(cut2, {}, &near) || !emitBand(near.bricks, cut2, SegmentWindow{0, 0})) return false;
       rest.first = 1;
     }
     if (std::isinf(limit)) return emitWholeGrid(rest);
     if (!classify()) return false;
-    return emitWithin(squaredCut<typename CellOps<C>::Dist>(limit), rest);
+    BandPart band;
+    const Dist cut2 = squaredCut<Dist>(limit);
+    return bandWithin(cut2, {}, &band) && emitBand(band.bricks, cut2, rest);
   }
 
  private:
+  using Dist = typename CellOps<C>::Dist;
+  /// A band's cells and the bricks it delivers.
+  struct BandPart {
+    CellBricks<C> outside;
+    CellBricks<Inside> inside;
+    BandBricks<C, Inside> bricks;
+  };
+
   bool signedField() const { return !measure_.labels && measure_.inside_negative; }
   BandMeasure outsideMeasure() const { return {measure_.labels, true, measure_.black_border}; }
   static constexpr BandMeasure kInsideMeasure{false, false, 0};
@@ -279,43 +308,99 @@ class CellsRun {
         result_, on_segment_, window);
   }
 
-  /// The voxels within sqrt(cut2) units, from the band's bricks.
-  bool emitWithin(typename CellOps<C>::Dist cut2, SegmentWindow window) {
+  /// The band within sqrt(cut2) units on brick layers `layers`: its cells, and the bricks that deliver a voxel.
+  bool bandWithin(Dist cut2, separable_internal::BrickLayers layers, BandPart* part) {
     const Interrupter* interrupter = options_.interrupter;
-    CellBricks<C> outside;
-    CellBricks<Inside> inside;
     if (!separable_internal::cellsWithin<C, T>(grid_, labels_, classes_, outsideMeasure(), cut2, w2_, interrupter,
-                                               &outside) ||
+                                               &part->outside, layers) ||
         (signedField() && !separable_internal::cellsWithin<Inside, T>(grid_, labels_, classes_, kInsideMeasure,
                                                                       typename CellOps<Inside>::Dist(cut2), w2_,
-                                                                      interrupter, &inside)))
+                                                                      interrupter, &part->inside, layers)))
       return false;
-    BandSource<C, Inside, T, false> source{grid_, signedField(), labels_, cut2, {}, {}, {}};
     // Voxels delivered at 0 whatever the bricks (an unsigned field's seeds, the multi-label EDT's label 0): the bricks
     // holding one join the computed ones.
-    std::vector<uint64_t> keys = outside.keys;
-    keys.insert(keys.end(), inside.keys.begin(), inside.keys.end());
+    std::vector<uint64_t> keys = part->outside.keys;
+    keys.insert(keys.end(), part->inside.keys.begin(), part->inside.keys.end());
     const uint8_t zero_kind = measure_.labels ? separable_internal::kAllMaskVoxels : separable_internal::kNoMaskVoxel;
-    if (measure_.labels || !measure_.inside_negative)
-      for (size_t b = 0; b < classes_.mask.size(); ++b)
+    if (measure_.labels || !measure_.inside_negative) {
+      const uint64_t layer = uint64_t(grid_.brickDims().x) * uint64_t(grid_.brickDims().y);
+      const uint64_t lo = uint64_t(std::max(layers.lo, 0)) * layer,
+                     hi = std::min(uint64_t(std::min(layers.hi, grid_.brickDims().z)) * layer, classes_.mask.size());
+      for (uint64_t b = lo; b < hi; ++b)
         if (classes_.mask[b] != zero_kind) keys.push_back(b);
+    }
     tbb::parallel_sort(keys.begin(), keys.end());
     keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-    source.outside.reserve(keys.size());
-    source.inside.reserve(keys.size());
+    BandBricks<C, Inside>& bricks = part->bricks;
+    bricks.outside.reserve(keys.size());
+    bricks.inside.reserve(keys.size());
     for (uint64_t k : keys) {
-      source.outside.push_back(outside.find(k));
-      source.inside.push_back(inside.find(k));
+      bricks.outside.push_back(part->outside.find(k));
+      bricks.inside.push_back(part->inside.find(k));
     }
-    source.keys = std::move(keys);
-    result_->bricks_allocated = int64_t(outside.keys.size() + inside.keys.size());
+    bricks.keys = std::move(keys);
+    result_->bricks_allocated += int64_t(part->outside.keys.size() + part->inside.keys.size());
+    return true;
+  }
+
+  /// Streams `window` of the band `bricks` within sqrt(cut2) units.
+  bool emitBand(const BandBricks<C, Inside>& bricks, Dist cut2, SegmentWindow window) {
     if (measure_.labels)
-      return separable_internal::emitSegments(
-          grid_, options_,
-          BandSource<C, Inside, T, true>{grid_, false, labels_, cut2, std::move(source.keys), std::move(source.outside),
-                                         std::move(source.inside)},
-          result_, on_segment_, window);
-    return separable_internal::emitSegments(grid_, options_, source, result_, on_segment_, window);
+      return separable_internal::emitSegments(grid_, options_,
+                                              BandSource<C, Inside, T, true>{grid_, false, labels_, cut2, bricks},
+                                              result_, on_segment_, window);
+    return separable_internal::emitSegments(
+        grid_, options_, BandSource<C, Inside, T, false>{grid_, signedField(), labels_, cut2, bricks}, result_,
+        on_segment_, window);
+  }
+
+  /// The band within the limit (sqrt(cut2) units) in two parts along z (see run()).
+  bool emitLimitInParts(Dist cut2) {
+    const int layers = grid_.brickDims().z;
+    const int split = firstPartEnd(cut2);
+    if (split >= layers) {  // one part
+      BandPart band;
+      return bandWithin(cut2, {}, &band) && emitBand(band.bricks, cut2, {});
+    }
+    BandPart first, rest;
+    if (!bandWithin(cut2, {0, split}, &first) || !emitBand(first.bricks, cut2, SegmentWindow{0, 0, true}) ||
+        !bandWithin(cut2, {split, layers}, &rest))
+      return false;
+    // Both parts, in (z, y, x) order (the first part's layers come before the rest's): segment 0 of the rest, then
+    // every later segment of both.
+    BandBricks<C, Inside> both = std::move(first.bricks);
+    const size_t delivered = both.keys.size();
+    both.keys.insert(both.keys.end(), rest.bricks.keys.begin(), rest.bricks.keys.end());
+    both.outside.insert(both.outside.end(), rest.bricks.outside.begin(), rest.bricks.outside.end());
+    both.inside.insert(both.inside.end(), rest.bricks.inside.begin(), rest.bricks.inside.end());
+    rest.bricks = {};
+    SegmentWindow window;
+    window.delivered = delivered;
+    return emitBand(both, cut2, window);
+  }
+
+  /// Where the first part of emitLimitInParts ends (a brick layer; the layer count: no split): past the first layer
+  /// holding a boundary, and on while the boundary bricks its passes read (the reach beyond its end included) stay
+  /// within 1/32 of the band's.
+  int firstPartEnd(Dist cut2) const {
+    const std::vector<int64_t> per_layer =
+        separable_internal::boundaryBricksPerLayer(grid_, classes_, outsideMeasure());
+    const int layers = int(per_layer.size());
+    const int reach = separable_internal::reachLayers(double(cut2), w2_[2]);
+    int64_t total = 0;
+    for (int64_t n : per_layer) total += n;
+    int end = 0;
+    while (end < layers && per_layer[size_t(end)] == 0) ++end;
+    if (++end >= layers) return layers;
+    int64_t read = 0;
+    for (int z = 0; z < std::min(end + reach, layers); ++z) read += per_layer[size_t(z)];
+    while (end < layers) {
+      const int64_t next = read + (end + reach < layers ? per_layer[size_t(end + reach)] : 0);
+      if (32 * next > total) break;
+      read = next;
+      ++end;
+    }
+    return end;
   }
 
   const Grid& grid_;

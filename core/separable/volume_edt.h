@@ -24,19 +24,25 @@
 //   * Streaming: segments of options.segment_length_world, nearest first, each voxel delivered once in the segment
 //     its |distance| falls in (the last one's upper bound is the limit); bricks sorted by origin (z, y, x); chunks
 //     of options.max_chunk_bricks with the last one marked complete; the final segment marked last. Near field
-//     first: the separable passes cannot finish near voxels before far ones, so when there is more than one segment
-//     (and, with a limit, the limit reaches at least four times as many bricks as a segment) segment 0 is computed
-//     first by the band within its bound and streamed, then the rest (whole grid or the limit's band) — the first
-//     bricks after a few percent of the run. When nothing lies past segment 0, an empty segment 1 marks the end.
+//     first: the separable passes cannot finish near voxels before far ones, so
+//       - with a limit and chunks, the limit's band is computed in two parts along z: the first brick layers holding
+//         a boundary (up to ~1/32 of the band's boundary bricks), whose segment-0 chunks are streamed at once, then
+//         the rest (the layers within the limit of the cut are read by both), then segment 0's other chunks and the
+//         later segments — the first bricks after a few percent of the run, at the cost of the cut's reach;
+//       - otherwise, when there is more than one segment (and, with a limit, the limit reaches at least four times as
+//         many bricks as a segment) segment 0 is computed first by the band within its bound and streamed, then the
+//         rest (whole grid or the limit's band). When nothing lies past segment 0, an empty segment 1 marks the end.
 //   * Threads: options.threads > 0 runs in a task_arena of that size, else in the caller's. The result is
 //     bit-identical for any thread count. The interrupter is polled per slice, row or run of bricks in every pass
 //     and per brick range while emitting; an interrupted run returns FieldRunResult::interrupted with what it
 //     delivered so far.
 //   * Memory: whole grid, 4 bytes per grid voxel (8 when signed or with nearest labels); with a limit, 2 KiB per
 //     visited brick (twice when signed or with nearest labels) and five bytes per grid brick; plus one chunk of output
-//     bricks; near field first adds nothing to the peak (its band is freed before the rest is computed).
-//     FieldRunResult::bricks_allocated counts the bricks holding distances in the last band computed: the
-//     limit's, or without a limit the first segment's when the near field came first (0 otherwise).
+//     bricks. Near field first: the first segment's band is freed before the rest is computed (nothing added to the
+//     peak); the two parts of a limit's band add the bricks of the layers within the limit of the cut, which both
+//     compute. FieldRunResult::bricks_allocated counts the bricks holding distances in the last band computed: the
+//     limit's (both parts' own), or without a limit the first segment's when the near field came first (0
+//     otherwise).
 // Errors (the volume's dims, the grid, checkVolumeMeasure's conditions, a limit that is not > 0, closest features of
 // the multi-label EDT) throw std::invalid_argument, like the engine's preconditions.
 #pragma once

@@ -25,6 +25,11 @@ constexpr int kStride[3] = {64, 8, 1};  // brickOffset's step along x, y, z
 constexpr int kWindowReach = 16;        // see cellsWithin
 constexpr int kMultiLabelWindowReach = 2;  // see cellsWithin
 
+/// Voxels along an axis of squared scale `w2` within sqrt(cut2) units.
+int reachVoxels(double cut2, double w2) {
+  return int(std::min(std::floor(std::sqrt(cut2) / std::sqrt(w2)), double(kMaxGridDim)));
+}
+
 bool hasZeroByte(uint64_t w) { return ((w - 0x0101010101010101ull) & ~w & 0x8080808080808080ull) != 0; }
 
 int along(const Coord& c, int axis) { return axis == 0 ? c.x : axis == 1 ? c.y : c.z; }
@@ -98,14 +103,16 @@ class BrickArena {
 };
 
 /// Groups `bricks` (their coordinates and pool slots; slot kNoSlot: not allocated yet) along `axis`, dilated by
-/// `reach` bricks along it, into runs. Bricks the dilation adds get fresh slots at the end of the pool.
+/// `reach` bricks along it within [clip_lo, clip_hi] (the bricks lie there), into runs. Bricks the dilation adds get
+/// fresh slots at the end of the pool.
 constexpr uint32_t kNoSlot = ~uint32_t(0);
 struct BrickRef {
   int c[3];
   uint32_t slot;
 };
 template <class Pool>
-Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const Coord& brick_dims, Pool& pool) {
+Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const Coord& brick_dims, Pool& pool, int clip_lo = 0,
+               int clip_hi = std::numeric_limits<int>::max()) {
   const int o0 = axis == 0 ? 1 : 0, o1 = axis == 2 ? 1 : 2;  // the other two axes, ascending
   tbb::parallel_sort(bricks.begin(), bricks.end(), [&](const BrickRef& a, const BrickRef& b) {
     return std::tie(a.c[o1], a.c[o0], a.c[axis]) < std::tie(b.c[o1], b.c[o0], b.c[axis]);
@@ -118,10 +125,11 @@ Runs buildRuns(std::vector<BrickRef>& bricks, int axis, int reach, const Coord& 
     // Bricks i..j-1 share a line of bricks; merge their dilated intervals.
     size_t k = i;
     while (k < j) {
-      const int lo = std::max(0, bricks[k].c[axis] - reach);
-      int hi = std::min(n_axis - 1, bricks[k].c[axis] + reach);
+      const int top = std::min(n_axis - 1, clip_hi);
+      const int lo = std::max(std::max(0, clip_lo), bricks[k].c[axis] - reach);
+      int hi = std::min(top, bricks[k].c[axis] + reach);
       size_t m = k + 1;
-      while (m < j && bricks[m].c[axis] - reach <= hi + 1) hi = std::min(n_axis - 1, bricks[m++].c[axis] + reach);
+      while (m < j && bricks[m].c[axis] - reach <= hi + 1) hi = std::min(top, bricks[m++].c[axis] + reach);
       Runs::Run run{{bricks[i].c[o0], bricks[i].c[o1]}, lo, hi, r.slot.size()};
       size_t e = k;  // walks the existing bricks k..m-1, which lie inside [lo, hi] in order
       for (int a = lo; a <= hi; ++a) {
@@ -236,6 +244,45 @@ bool forEachLines(const Runs& r, int axis, const Coord& dims, int reach_voxels, 
   return !isInterrupted(interrupter);
 }
 
+// Where what a target measures to can lie: seed field, the bricks holding a seed's boundary (mixed ones, and
+// all-seed ones beside a brick that is not all seeds); multi-label, the bricks holding a label boundary (mixed ones,
+// uniform ones beside a brick that is not uniform of the same label, and with a black border those at the faces).
+bool isBoundaryBrick(const Grid& grid, const BrickClasses& classes, const BandMeasure& measure, int bx, int by,
+                     int bz) {
+  const Coord bd = grid.brickDims();
+  const bool multi = measure.multi_label;
+  const uint8_t all_seeds = measure.seeds_nonzero ? kAllMaskVoxels : kNoMaskVoxel;
+  const uint8_t no_seeds = measure.seeds_nonzero ? kNoMaskVoxel : kAllMaskVoxels;
+  const size_t b = size_t(grid.brickIndex({bx, by, bz}));
+  const int c[3] = {bx, by, bz};
+  if (multi) {
+    if (!classes.uniform[b]) return true;
+    for (int a = 0; a < 3; ++a)
+      for (int s : {-1, 1}) {
+        int nc[3] = {c[0], c[1], c[2]};
+        nc[a] += s;
+        if (nc[a] < 0 || nc[a] >= along(bd, a)) {
+          if ((measure.black_border >> (2 * a + (s > 0))) & 1) return true;
+          continue;
+        }
+        const size_t n = size_t(grid.brickIndex({nc[0], nc[1], nc[2]}));
+        if (!classes.uniform[n] || classes.label[n] != classes.label[b]) return true;
+      }
+    return false;
+  }
+  const uint8_t kind = classes.mask[b];
+  bool boundary = kind == kSomeMaskVoxels;
+  if (kind == all_seeds)
+    for (int a = 0; a < 3 && !boundary; ++a)
+      for (int s : {-1, 1}) {
+        int nc[3] = {c[0], c[1], c[2]};
+        nc[a] += s;
+        if (nc[a] < 0 || nc[a] >= along(bd, a)) continue;
+        if (classes.mask[size_t(grid.brickIndex({nc[0], nc[1], nc[2]}))] != all_seeds) boundary = true;
+      }
+  return boundary && kind != no_seeds;
+}
+
 }  // namespace
 
 template <class C>
@@ -317,52 +364,28 @@ BrickClasses classifyBricks(const Grid& grid, const T* labels, bool multi_label,
 
 template <class C, class T>
 bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes, const BandMeasure& measure,
-                 typename CellOps<C>::Dist cut2, const double w2[3], const Interrupter* interrupter,
-                 CellBricks<C>* out) {
+                 typename CellOps<C>::Dist cut2, const double w2[3], const Interrupter* interrupter, CellBricks<C>* out,
+                 BrickLayers layers) {
   using Ops = CellOps<C>;
   const Coord dims = grid.dims(), bd = grid.brickDims();
   const bool multi = measure.multi_label;
-  const uint8_t all_seeds = measure.seeds_nonzero ? kAllMaskVoxels : kNoMaskVoxel;
-  const uint8_t no_seeds = measure.seeds_nonzero ? kNoMaskVoxel : kAllMaskVoxels;
-  // Where what a target measures to can lie: seed field, the bricks holding a seed's boundary (mixed ones, and
-  // all-seed ones beside a brick that is not all seeds); multi-label, the bricks holding a label boundary (mixed ones,
-  // uniform ones beside a brick that is not uniform of the same label, and with a black border those at the faces).
-  auto boundaryBrick = [&](int bx, int by, int bz) {
-    const size_t b = size_t(grid.brickIndex({bx, by, bz}));
-    const int c[3] = {bx, by, bz};
-    if (multi) {
-      if (!classes.uniform[b]) return true;
-      for (int a = 0; a < 3; ++a)
-        for (int s : {-1, 1}) {
-          int nc[3] = {c[0], c[1], c[2]};
-          nc[a] += s;
-          if (nc[a] < 0 || nc[a] >= along(bd, a)) {
-            if ((measure.black_border >> (2 * a + (s > 0))) & 1) return true;
-            continue;
-          }
-          const size_t n = size_t(grid.brickIndex({nc[0], nc[1], nc[2]}));
-          if (!classes.uniform[n] || classes.label[n] != classes.label[b]) return true;
-        }
-      return false;
-    }
-    const uint8_t kind = classes.mask[b];
-    bool boundary = kind == kSomeMaskVoxels;
-    if (kind == all_seeds)
-      for (int a = 0; a < 3 && !boundary; ++a)
-        for (int s : {-1, 1}) {
-          int nc[3] = {c[0], c[1], c[2]};
-          nc[a] += s;
-          if (nc[a] < 0 || nc[a] >= along(bd, a)) continue;
-          if (classes.mask[size_t(grid.brickIndex({nc[0], nc[1], nc[2]}))] != all_seeds) boundary = true;
-        }
-    return boundary && kind != no_seeds;
-  };
+  // The reach along each axis: voxels (of that axis) within sqrt(cut2) units.
+  int reach_voxels[3], reach_bricks[3];
+  for (int a = 0; a < 3; ++a) {
+    reach_voxels[a] = reachVoxels(double(cut2), w2[a]);
+    reach_bricks[a] = reachLayers(double(cut2), w2[a]);
+  }
+  // The layers computed, and the layers their targets reach (what they measure to lies there).
+  const int out_lo = std::max(layers.lo, 0), out_hi = std::min(layers.hi, bd.z);
+  if (out_lo >= out_hi) return true;
+  const int read_lo = std::max(out_lo - reach_bricks[2], 0), read_hi = std::min(out_hi + reach_bricks[2], bd.z);
   std::vector<std::vector<BrickRef>> per_slab(size_t(bd.z));
-  tbb::parallel_for(0, bd.z, [&](int bz) {
+  tbb::parallel_for(read_lo, read_hi, [&](int bz) {
     if (isInterrupted(interrupter)) return;
     for (int by = 0; by < bd.y; ++by)
       for (int bx = 0; bx < bd.x; ++bx)
-        if (boundaryBrick(bx, by, bz)) per_slab[size_t(bz)].push_back({{bx, by, bz}, kNoSlot});
+        if (isBoundaryBrick(grid, classes, measure, bx, by, bz))
+          per_slab[size_t(bz)].push_back({{bx, by, bz}, kNoSlot});
   });
   if (isInterrupted(interrupter)) return false;
   std::vector<BrickRef> bricks;
@@ -385,13 +408,6 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
     return live;
   };
 
-  // The reach along each axis: voxels (of that axis) within sqrt(cut2) units.
-  const double reach_units = std::sqrt(double(cut2));
-  int reach_voxels[3], reach_bricks[3];
-  for (int a = 0; a < 3; ++a) {
-    reach_voxels[a] = int(std::min(std::floor(reach_units / std::sqrt(w2[a])), double(kMaxGridDim)));
-    reach_bricks[a] = (reach_voxels[a] + kBrickSize - 1) / kBrickSize;
-  }
   const auto keep = [cut2](const C& c) { return Ops::dist(c) <= cut2 ? c : Ops::far(); };
   std::vector<C*> pool;
   BrickArena<C> arena;
@@ -439,7 +455,9 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
   // each label run of it).
   for (int axis : {1, 2}) {
     bricks = withBoundary(liveBricks(runs, axis == 1 ? 0 : 1, pool));
-    runs = buildRuns(bricks, axis, reach_bricks[axis], bd, pool);
+    // Along z the runs stop at the layers read: the targets beyond are not computed.
+    runs = axis == 2 ? buildRuns(bricks, axis, reach_bricks[axis], bd, pool, read_lo, read_hi - 1)
+                     : buildRuns(bricks, axis, reach_bricks[axis], bd, pool);
     const int o1 = axis == 2 ? 1 : 2;  // the second other axis: the lanes of a bundle
     const int reach = reach_voxels[axis];
     const double wa = w2[axis];
@@ -615,6 +633,9 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
     if (!ok) return false;
   }
   bricks = liveBricks(runs, 2, pool);
+  bricks.erase(std::remove_if(bricks.begin(), bricks.end(),
+                              [&](const BrickRef& b) { return b.c[2] < out_lo || b.c[2] >= out_hi; }),
+               bricks.end());
   std::vector<std::pair<uint64_t, uint32_t>> order(bricks.size());
   for (size_t i = 0; i < bricks.size(); ++i) {
     const int* c = bricks[i].c;
@@ -631,10 +652,23 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
   return true;
 }
 
+std::vector<int64_t> boundaryBricksPerLayer(const Grid& grid, const BrickClasses& classes, const BandMeasure& measure) {
+  const Coord bd = grid.brickDims();
+  std::vector<int64_t> count(size_t(bd.z), 0);
+  tbb::parallel_for(0, bd.z, [&](int bz) {
+    for (int by = 0; by < bd.y; ++by)
+      for (int bx = 0; bx < bd.x; ++bx) count[size_t(bz)] += isBoundaryBrick(grid, classes, measure, bx, by, bz);
+  });
+  return count;
+}
+
+int reachLayers(double cut2, double w2z) { return (reachVoxels(cut2, w2z) + kBrickSize - 1) / kBrickSize; }
+
 // The cells and label types the separable volume EDT runs with.
-#define DISTBAND_CELLS_WITHIN(C, T)                                                                                  \
-  template bool cellsWithin<C, T>(const Grid&, const T*, const BrickClasses&, const BandMeasure&,                    \
-                                  typename CellOps<C>::Dist, const double[3], const Interrupter*, CellBricks<C>*);
+#define DISTBAND_CELLS_WITHIN(C, T)                                                                               \
+  template bool cellsWithin<C, T>(const Grid&, const T*, const BrickClasses&, const BandMeasure&,                 \
+                                  typename CellOps<C>::Dist, const double[3], const Interrupter*, CellBricks<C>*, \
+                                  BrickLayers);
 #define DISTBAND_FOR_LABELS(C)      \
   DISTBAND_CELLS_WITHIN(C, uint8_t)  \
   DISTBAND_CELLS_WITHIN(C, uint16_t) \

@@ -27,6 +27,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -68,11 +69,26 @@ struct BandMeasure {
   uint8_t black_border = 0;   ///< multi-label: the faces beyond which the outside is label 0 (VolumeMeasure's)
 };
 
-/// See above. `classes` from classifyBricks; `cut2` >= 0 (squared units); `w2`: the squared axis scales. False when
-/// interrupted.
+/// A range of brick layers along z, [lo, hi) (Grid::brickDims().z): the part of the band a call computes.
+struct BrickLayers {
+  int lo = 0;
+  int hi = std::numeric_limits<int>::max();
+};
+
+/// See above. `classes` from classifyBricks; `cut2` >= 0 (squared units); `w2`: the squared axis scales. Only the
+/// bricks of `layers` are computed and listed (exact there: the passes read the layers within the reach beyond it,
+/// so splitting a band into layer ranges costs the bricks those reaches visit twice). False when interrupted.
 template <class C, class T>
 bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes, const BandMeasure& measure,
-                 typename CellOps<C>::Dist cut2, const double w2[3], const Interrupter* interrupter,
-                 CellBricks<C>* out);
+                 typename CellOps<C>::Dist cut2, const double w2[3], const Interrupter* interrupter, CellBricks<C>* out,
+                 BrickLayers layers = {});
+
+/// The bricks the passes start from (see the contract: those holding a boundary of what `measure` measures), counted
+/// per layer along z: where a band's work lies, to split it.
+std::vector<int64_t> boundaryBricksPerLayer(const Grid& grid, const BrickClasses& classes, const BandMeasure& measure);
+
+/// The brick layers along z within `cut2` (squared units) of a layer, with the axis's squared scale `w2z`: how far
+/// the band of a layer range reaches beyond it.
+int reachLayers(double cut2, double w2z);
 
 }  // namespace distband::separable_internal

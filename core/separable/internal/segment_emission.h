@@ -14,7 +14,9 @@
 // `window` streams only segments [window.first, window.last] of the field, so one run can deliver its near field from
 // one source and the rest from another: a closed window never marks a segment last; an open one (last = kOpen)
 // starting past 0 marks its final segment last, and when nothing lies in it, delivers an empty segment window.first
-// marked complete and last (the end of the stream).
+// marked complete and last (the end of the stream). A segment can also come from several sources, one after the
+// other in (z, y, x) order (SegmentWindow::continued on all but the last; or the last source holds the earlier
+// ones' bricks first, SegmentWindow::delivered); its stats add up in one entry.
 #pragma once
 
 #include <algorithm>
@@ -56,6 +58,12 @@ struct SegmentWindow {
   static constexpr int kOpen = std::numeric_limits<int>::max();
   int first = 0;
   int last = kOpen;
+  /// More bricks of segment `last` (a closed window) follow from another source: its final chunk is not marked
+  /// complete, and an empty one is not delivered.
+  bool continued = false;
+  /// The source's first `delivered` bricks have delivered their voxels of segment `first` already (a continued
+  /// segment): they are not delivered in it again.
+  size_t delivered = 0;
 };
 
 /// Streams `source` (see the contract above). False when interrupted.
@@ -87,7 +95,7 @@ bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source
         if (s < window.first || s > window.last) continue;
         lo = std::min(lo, s);
         hi = std::max(hi, s);
-        if (length == 0) break;  // one segment: a voxel is enough
+        if (length == 0 || (lo == window.first && hi == window.last)) break;  // nothing more to learn
       }
       first[b] = lo;
       last[b] = hi;
@@ -100,7 +108,8 @@ bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source
   if (window.last != SegmentWindow::kOpen) segments = std::min(segments, window.last + 1);
   std::vector<std::vector<uint32_t>> by_segment(static_cast<size_t>(segments));
   for (size_t b = 0; b < bricks; ++b)
-    for (int s = first[b]; s <= last[b]; ++s) by_segment[size_t(s)].push_back(uint32_t(b));
+    for (int s = first[b]; s <= last[b]; ++s)
+      if (s != window.first || b >= window.delivered) by_segment[size_t(s)].push_back(uint32_t(b));
   const bool marks_last = window.last == SegmentWindow::kOpen;
   std::vector<int>().swap(first);
   std::vector<int>().swap(last);
@@ -148,21 +157,29 @@ bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source
       for (const Brick& b : part) stats.voxels += b.mask.count();
       stats.bricks += int64_t(part.size());
       const bool done = c1 >= list.size();
+      const bool continued = done && window.continued && s == window.last;
       SegmentBricks p;
       p.index = s;
       p.lower_world = stats.lower_world;
       p.upper_world = stats.upper_world;
-      p.complete = done;
+      p.complete = done && !continued;
       p.last = done && s + 1 == segments && marks_last;
       p.bricks = std::move(part);
-      if (on_segment) on_segment(std::move(p));
+      if (on_segment && !(continued && p.bricks.empty())) on_segment(std::move(p));
       if (done) break;
       c0 = c1;
     }
     std::vector<uint32_t>().swap(by_segment[size_t(s)]);
     stats.seconds = std::chrono::duration<double>(Clock::now() - ts).count();
     result->voxels += stats.voxels;
-    result->segments.push_back(stats);
+    if (!result->segments.empty() && result->segments.back().index == s) {  // continued from another source
+      SegmentStats& into = result->segments.back();
+      into.voxels += stats.voxels;
+      into.bricks += stats.bricks;
+      into.seconds += stats.seconds;
+    } else {
+      result->segments.push_back(stats);
+    }
   }
   return true;
 }

@@ -119,33 +119,36 @@ TEST(SeparableEdtTest, WithALimitDeliversExactlyTheVoxelsWithinIt) {
   // Limits in voxels; squares that are not integers, so no voxel sits on the limit. 9.7 reaches two bricks away;
   // 20.5 takes the parabola envelope instead of the window minimum; 40.5 reaches four times a 0.3-segment's bricks,
   // so its first segment comes from a band of its own (near field first).
+  // With chunks the band comes in two parts along z (near field first).
   for (double limit : {0.7, 1.5, 3.3, 5.5, 9.7, 20.5, 40.5})
     for (bool inside_negative : {false, true})
-      for (double segment : {0.0, 0.3}) {
-        BandOptions o;
-        o.limit_world = limit * 0.25;
-        o.segment_length_world = segment;
-        o.max_chunk_bricks = segment > 0 ? 5 : 0;
-        const Collected c = run(grid, mask, inside_negative, o);
-        const std::string where = fmt::format("limit {} signed {} segment {}", limit, inside_negative, segment);
-        EXPECT_EQ(c.order_error, "") << where;
-        int64_t wrong = 0, missing = 0, extra = 0, within = 0;
-        for (size_t i = 0; i < c.values.size(); ++i) {
-          const double want = inside_negative ? signed_exact[i] : std::sqrt(exact2[i]);
-          if (std::abs(want) > limit) {
-            extra += c.times_delivered[i] != 0;
-            continue;
+      for (double segment : {0.0, 0.3})
+        for (size_t chunk : {0, 5}) {
+          BandOptions o;
+          o.limit_world = limit * 0.25;
+          o.segment_length_world = segment;
+          o.max_chunk_bricks = chunk;
+          const Collected c = run(grid, mask, inside_negative, o);
+          const std::string where =
+              fmt::format("limit {} signed {} segment {} chunk {}", limit, inside_negative, segment, chunk);
+          EXPECT_EQ(c.order_error, "") << where;
+          int64_t wrong = 0, missing = 0, extra = 0, within = 0;
+          for (size_t i = 0; i < c.values.size(); ++i) {
+            const double want = inside_negative ? signed_exact[i] : std::sqrt(exact2[i]);
+            if (std::abs(want) > limit) {
+              extra += c.times_delivered[i] != 0;
+              continue;
+            }
+            ++within;
+            missing += c.times_delivered[i] != 1;
+            wrong += c.times_delivered[i] == 1 && std::abs(c.values[i] - 0.25 * want) > 1e-6;
           }
-          ++within;
-          missing += c.times_delivered[i] != 1;
-          wrong += c.times_delivered[i] == 1 && std::abs(c.values[i] - 0.25 * want) > 1e-6;
+          EXPECT_EQ(missing, 0) << where;
+          EXPECT_EQ(extra, 0) << where << ": delivered beyond the limit";
+          EXPECT_EQ(wrong, 0) << where;
+          EXPECT_EQ(c.result.voxels, within) << where;
+          for (const SegmentStats& s : c.result.segments) EXPECT_LE(s.upper_world, o.limit_world) << where;
         }
-        EXPECT_EQ(missing, 0) << where;
-        EXPECT_EQ(extra, 0) << where << ": delivered beyond the limit";
-        EXPECT_EQ(wrong, 0) << where;
-        EXPECT_EQ(c.result.voxels, within) << where;
-        for (const SegmentStats& s : c.result.segments) EXPECT_LE(s.upper_world, o.limit_world) << where;
-      }
 }
 
 TEST(SeparableEdtTest, WithALimitTheWorkFollowsTheBand) {
@@ -168,46 +171,58 @@ TEST(SeparableEdtTest, WithALimitTheWorkFollowsTheBand) {
   }
 }
 
-// Near field first: with several segments the first one is computed by the band within its bound and streamed before
-// the rest is computed. Stopped when segment 0 is complete, a run has built only that band: no whole grid (which
-// allocates no bricks), and with a limit fewer bricks than the limit's band. Without segments, or with a limit of a
-// few bricks (where the first segment's band costs nearly the limit's), the field is computed once.
-TEST(SeparableEdtTest, NearFieldFirstTheFirstSegmentComesFromItsOwnBand) {
-  const Coord d{96, 80, 72};
+// Near field first. Without a limit, with several segments, the first one is computed by the band within its bound
+// and streamed before the whole grid: stopped when segment 0 is complete, a run has built only that band (the whole
+// grid allocates no bricks). With a limit and chunks, the band comes in two parts along z and the first part's
+// segment 0 is streamed before the rest is computed: stopped at the first chunk, a run has built a small part of the
+// limit's band. With a limit and no chunks, a limit of 40 voxels (5 bricks) against 2-voxel segments (1 brick) takes
+// the first segment's band, the smaller one; a limit of 10 voxels (2 bricks), where the first segment's band costs
+// nearly the limit's, is computed once.
+TEST(SeparableEdtTest, NearFieldFirstTheFirstSegmentComesBeforeTheRestIsComputed) {
+  const Coord d{64, 56, 160};  // 20 layers of bricks along z
   const Grid grid({0, 0, 0}, 1, d);
-  const std::vector<uint8_t> mask = randomBlobs(d, 4, 21);
+  const std::vector<uint8_t> mask = randomBlobs(d, 12, 21);
   const LabelVolume volume = LabelVolume::ofMask(d, mask);
-  // Runs `o`, stopping once segment 0 is complete: the bricks allocated when it stopped, the segments seen.
-  auto stoppedAfterSegment0 = [&](BandOptions o, std::vector<int>* seen) {
+  // Runs `o` until `stop_when` says so: the bricks allocated then.
+  auto stoppedWhen = [&](BandOptions o, const std::function<bool(const SegmentBricks&)>& stop_when) {
     Interrupter stop;
     o.interrupter = &stop;
     const FieldRunResult r = computeSeparableVolumeField(grid, volume, {false, true, false}, o, [&](SegmentBricks&& s) {
-      seen->push_back(s.index);
-      if (s.index == 0 && s.complete) stop.cancel(Status::Code::kCancelled, "test");
+      if (stop_when(s)) stop.cancel(Status::Code::kCancelled, "test");
     });
     EXPECT_TRUE(r.interrupted);
     return r.bricks_allocated;
   };
+  auto segment0Complete = [](const SegmentBricks& s) { return s.index == 0 && s.complete; };
+  auto firstChunk = [](const SegmentBricks& s) {
+    EXPECT_EQ(s.index, 0);
+    EXPECT_FALSE(s.bricks.empty()) << "the first chunk holds bricks";
+    return true;
+  };
   BandOptions o;
   o.segment_length_world = 2;
   o.max_chunk_bricks = 16;
-  std::vector<int> seen;
-  EXPECT_GT(stoppedAfterSegment0(o, &seen), 0) << "segment 0 came from a band, before the whole grid";
-  EXPECT_EQ(seen.back(), 0);
-  // A limit of 40 voxels (5 bricks) against 2-voxel segments (1 brick): the first segment's band is the smaller one.
-  o.limit_world = 40;
-  seen.clear();
-  const int64_t first_band = stoppedAfterSegment0(o, &seen);
-  BandOptions once = o;
-  once.segment_length_world = 0;
-  const Collected whole = run(grid, mask, true, once);
-  EXPECT_GT(first_band, 0);
-  EXPECT_LT(first_band, whole.result.bricks_allocated / 2);
-  // A limit of 10 voxels (2 bricks): computed once, so stopping after segment 0 leaves the limit's whole band.
-  o.limit_world = 10;
-  once.limit_world = 10;
-  seen.clear();
-  EXPECT_EQ(stoppedAfterSegment0(o, &seen), run(grid, mask, true, once).result.bricks_allocated);
+  EXPECT_GT(stoppedWhen(o, segment0Complete), 0) << "segment 0 came from a band, before the whole grid";
+  for (double limit : {10.0, 40.0}) {
+    BandOptions once = o;
+    once.limit_world = limit;
+    once.segment_length_world = 0;
+    once.max_chunk_bricks = 0;
+    const int64_t band = run(grid, mask, true, once).result.bricks_allocated;
+    BandOptions chunked = o;
+    chunked.limit_world = limit;
+    const int64_t first_part = stoppedWhen(chunked, firstChunk);
+    EXPECT_GT(first_part, 0) << limit;
+    EXPECT_LT(first_part, band / 4) << limit;
+    BandOptions whole_segments = chunked;
+    whole_segments.max_chunk_bricks = 0;
+    const int64_t unchunked = stoppedWhen(whole_segments, segment0Complete);
+    if (limit == 40) {
+      EXPECT_LT(unchunked, band / 2) << "the first segment's band";
+    } else {
+      EXPECT_EQ(unchunked, band) << "computed once";
+    }
+  }
 }
 
 // Near field first when every voxel lies in segment 0: the second part has nothing, so an empty segment 1 ends the
@@ -342,6 +357,7 @@ TEST(SeparableEdtTest, MultiLabelEdtMatchesBruteForce) {
           BandOptions o;
           o.limit_world = limit;
           o.segment_length_world = limit > 3 ? 0.0 : 0.6;
+          o.max_chunk_bricks = limit > 2 ? 4 : 0;  // chunked: the band in two parts along z
           const VoxelType type = name == "noise" ? VoxelType::kUint8 : VoxelType::kUint16;
           const Collected c = run(grid, asVolume(d, labels, type), {true, false, black ? kAllFaces : uint8_t(0)}, o);
           const std::string where = fmt::format("{} spacing {},{},{} black {} limit {}", name, spacing.x, spacing.y,
@@ -442,6 +458,55 @@ TEST(SeparableEdtTest, LabelsIdenticalForAnyThreadCountAndStoppable) {
       EXPECT_TRUE(stopped.result.interrupted);
       EXPECT_EQ(stopped.result.voxels, 0);
     }
+}
+
+// With a limit and chunks, a tall volume's band comes in two parts along z: exact against brute force for the seed
+// field (signed, anisotropic, nearest labels) and the multi-label EDT with a black border, each voxel once, in order,
+// one entry per segment in the stats.
+TEST(SeparableEdtTest, WithALimitATallVolumeComesInTwoPartsExactly) {
+  const Coord d{21, 18, 90};
+  const std::vector<uint32_t> labels = labelBlobs(d, 14, 1.5, 5, 12);
+  std::vector<uint8_t> mask(labels.size());
+  for (size_t i = 0; i < labels.size(); ++i) mask[i] = labels[i] != 0;
+  for (const Vec3d& spacing : {Vec3d{1, 1, 1}, Vec3d{0.7, 0.7, 1.9}}) {
+    const Grid grid({0, 0, 0}, spacing, d);
+    const double sp[3] = {spacing.x, spacing.y, spacing.z};
+    const std::vector<double> signed_exact = oracle::signedEdt(d.x, d.y, d.z, mask, sp);
+    const std::vector<double> other_label = oracle::otherLabelDistance(d.x, d.y, d.z, labels, spacingOf(grid), true);
+    std::vector<uint32_t> nearest;
+    std::vector<bool> unique;
+    oracle::nearestSeedLabel(d.x, d.y, d.z, labels, spacingOf(grid), &nearest, &unique);
+    for (bool multi : {false, true})
+      for (double limit : {2.6, 9.5}) {
+        BandOptions o;
+        o.limit_world = limit;
+        o.segment_length_world = 1.3;
+        o.max_chunk_bricks = 3;
+        o.closest_features = !multi;
+        const VolumeMeasure measure{multi, !multi, multi ? kAllFaces : uint8_t(0)};
+        const Collected c = run(grid, asVolume(d, labels, VoxelType::kUint16), measure, o);
+        const std::string where = fmt::format("spacing {} multi {} limit {}", spacing.z, multi, limit);
+        EXPECT_EQ(c.order_error, "") << where;
+        int64_t wrong = 0, missing = 0, extra = 0, wrong_label = 0;
+        for (size_t i = 0; i < c.values.size(); ++i) {
+          const double want = multi ? other_label[i] : signed_exact[i];
+          if (std::abs(want) > limit * (1 + 1e-6)) {
+            extra += c.times_delivered[i] != 0;
+            continue;
+          }
+          if (std::abs(want) > limit * (1 - 1e-6)) continue;
+          missing += c.times_delivered[i] != 1;
+          wrong += c.times_delivered[i] == 1 && std::abs(c.values[i] - want) > 1e-5 * (1 + std::abs(want));
+          if (!multi && c.times_delivered[i] == 1 && labels[i] == 0 && unique[i])
+            wrong_label += c.closest[i] != int64_t(nearest[i]);
+        }
+        EXPECT_EQ(missing, 0) << where;
+        EXPECT_EQ(extra, 0) << where;
+        EXPECT_EQ(wrong, 0) << where;
+        EXPECT_EQ(wrong_label, 0) << where;
+        for (size_t s = 0; s < c.result.segments.size(); ++s) EXPECT_EQ(c.result.segments[s].index, int(s)) << where;
+      }
+  }
 }
 
 }  // namespace
