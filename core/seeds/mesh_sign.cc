@@ -174,16 +174,20 @@ bool planeDecides(double plane, double dist) { return plane * plane >= dist * di
 
 constexpr float kFarFromBoundary = 1e6f;  // frame units: no boundary anywhere near
 
-// The voxels of each 4^3 octant of a brick (octant o: x, y, z halves from bits 0, 1, 2).
-constexpr std::array<BrickMask, 8> makeOctants() {
-  std::array<BrickMask, 8> m{};
+// The voxels of each kEdge^3 box of a brick: box x + per y + per^2 z (per = 8 / kEdge boxes along an axis).
+template <int kEdge>
+constexpr std::array<BrickMask, (kBrickSize / kEdge) * (kBrickSize / kEdge) * (kBrickSize / kEdge)> makeBoxes() {
+  constexpr int per = kBrickSize / kEdge;
+  std::array<BrickMask, per * per * per> m{};
   for (int i = 0; i < kBrickVoxels; ++i) {
     const Coord c = brickLocal(i);
-    m[size_t((c.x >> 2) | (c.y >> 2) << 1 | (c.z >> 2) << 2)].words[size_t(i >> 6)] |= uint64_t(1) << (i & 63);
+    m[size_t(c.x / kEdge + per * (c.y / kEdge) + per * per * (c.z / kEdge))].words[size_t(i >> 6)] |= uint64_t(1)
+                                                                                                      << (i & 63);
   }
   return m;
 }
-constexpr std::array<BrickMask, 8> kOctants = makeOctants();
+constexpr auto kOctants = makeBoxes<4>();  // 4^3
+constexpr auto kCells = makeBoxes<2>();    // 2^3
 // The winding hierarchy's error bound (kThirdOrderTolerance per cluster, core/mesh/winding_number.cc; measured below
 // 0.011 near open meshes) with room to spare.
 constexpr double kWindingQueryError = 0.03;
@@ -580,18 +584,26 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     if (s.signWindingCertified(brick, brick.mask, brick_center, brick_radius, sites, site_triangle, voxel_size, scale))
       return {0, brick.mask.count(), 0, 0};
     // Refused whole (near a hole, a sharp edge, where parts meet): each 4^3 octant on its own, with half the spread
-    // and, nearer the boundary, half the box, before any voxel takes a query of its own.
-    for (int o = 0; o < 8; ++o) {
-      BrickMask octant;
-      for (int w = 0; w < kBrickVoxels / 64; ++w) octant.words[w] = todo.words[w] & kOctants[o].words[w];
-      if (octant.empty()) continue;
-      const Vec3d c = boxCenter(brick.origin + Coord{4 * (o & 1), 2 * (o & 2), o & 4}, 1.5);
-      if (!s.signWindingCertified(brick, octant, c, 1.5 * std::sqrt(scale.lengthSqr()), sites, site_triangle,
-                                  voxel_size, scale))
-        continue;
-      certified += octant.count();
-      for (int w = 0; w < kBrickVoxels / 64; ++w) todo.words[w] &= ~octant.words[w];
-    }
+    // and, nearer the boundary, half the box, then each 2^3 cell of what is left, before any voxel takes a query of
+    // its own.
+    auto certifyBoxes = [&](const auto& boxes, int edge) {
+      const int per_axis = kBrickSize / edge;
+      const double half = 0.5 * (edge - 1);
+      for (size_t k = 0; k < boxes.size() && !todo.empty(); ++k) {
+        BrickMask box;
+        for (int w = 0; w < kBrickVoxels / 64; ++w) box.words[w] = todo.words[w] & boxes[k].words[w];
+        if (box.empty()) continue;
+        const int i = int(k);
+        const Coord lo{edge * (i % per_axis), edge * (i / per_axis % per_axis), edge * (i / (per_axis * per_axis))};
+        if (!s.signWindingCertified(brick, box, boxCenter(brick.origin + lo, half), half * std::sqrt(scale.lengthSqr()),
+                                    sites, site_triangle, voxel_size, scale))
+          continue;
+        certified += box.count();
+        for (int w = 0; w < kBrickVoxels / 64; ++w) todo.words[w] &= ~box.words[w];
+      }
+    };
+    certifyBoxes(kOctants, 4);
+    certifyBoxes(kCells, 2);
     if (!todo.empty()) brick_boundary = s.boundaryDistance(brick_center, brick_radius);
   }
   // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
