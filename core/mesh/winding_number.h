@@ -25,7 +25,12 @@ class WindingNumber {
   /// early and the object must not be queried.
   explicit WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double beta = 2.0,
                          const Interrupter* interrupter = nullptr);
+  /// w(p), within ~0.01 of the exact sum near a mesh (measured below 0.011 near open meshes).
   double query(const Vec3d& p) const;
+  /// w(p) at about half query()'s cost near a mesh, within ~0.05 (measured below 0.042 within 3 voxels of open
+  /// meshes at 512^3: tests/core/mesh/winding_number_test.cc): clusters stay expansions up to ten times the
+  /// third-order term query() allows. For the side of 1/2 where it is far from 1/2.
+  double coarseQuery(const Vec3d& p) const;
   /// w at triangle t's centroid, t itself left out (the principal value on the surface).
   double principalValue(uint32_t t) const;
   /// The exact sum over all triangles (O(T)); for checks.
@@ -45,7 +50,7 @@ class WindingNumber {
     uint32_t left, right;   ///< children, 0 for a leaf
   };
   uint32_t build(uint32_t begin, uint32_t end);
-  double sum(const Vec3d& p, uint32_t skip) const;
+  double sum(const Vec3d& p, uint32_t skip, double tolerance) const;
   double solidAngle(const std::array<Vec3d, 3>& t, const Vec3d& p) const;
 
   std::vector<std::array<Vec3d, 3>> tris_;  ///< in hierarchy order

@@ -191,6 +191,9 @@ constexpr auto kCells = makeBoxes<2>();    // 2^3
 // The winding hierarchy's error bound (kThirdOrderTolerance per cluster, core/mesh/winding_number.cc; measured below
 // 0.011 near open meshes) with room to spare.
 constexpr double kWindingQueryError = 0.03;
+// WindingNumber::coarseQuery's (measured below 0.042), with room to spare: where the coarse value is farther than this
+// from 1/2, it decides the side; otherwise the full query does.
+constexpr double kCoarseQueryError = 0.1;
 
 }  // namespace
 
@@ -243,6 +246,9 @@ struct MeshSign::Tables {
   /// A lower bound on the distance (frame units) from every point within `radius` of p to the boundary curves;
   /// kFarFromBoundary when the mesh has none.
   double boundaryDistance(const Vec3d& p, double radius) const;
+  /// The winding number at p, as cheaply as its side of 1/2 allows: the coarse query, or the full one where the coarse
+  /// value lies within its error of 1/2; `error` gets the error bound of the value returned.
+  double windingAt(const Vec3d& p, double* error) const;
   /// Signs the voxels of `subset` (delivered voxels of the brick, all within `radius` frame units of `center`) with
   /// one winding query when that provably agrees with the exact winding number (below); false, nothing signed, else.
   bool signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
@@ -444,8 +450,11 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   const double drift = std::sqrt(spread2) / (std::numbers::pi * boundary);
   if (drift + kWindingQueryError >= 0.5) return false;
   const bool ref_behind = insidePseudonormal(at(ref), triangleOf(sites[ref]), std::abs(brick.values[ref]) / voxel_size);
-  const double w0 = winding->query(at(ref)) - (ref_behind ? 1.0 : 0.0);  // the front side's value
-  if (std::abs(w0) + drift + kWindingQueryError >= 0.5) return false;
+  // The front side's value: coarse first, the full query when the coarse one's error leaves the question open.
+  const double behind = ref_behind ? 1.0 : 0.0;
+  if (std::abs(winding->coarseQuery(at(ref)) - behind) + drift + kCoarseQueryError >= 0.5 &&
+      std::abs(winding->query(at(ref)) - behind) + drift + kWindingQueryError >= 0.5)
+    return false;
   for (int w = 0; w < kBrickVoxels / 64; ++w)
     for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
       const int i = w * 64 + std::countr_zero(bits);
@@ -454,6 +463,13 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
         brick.values[i] = -std::abs(brick.values[i]);
     }
   return true;
+}
+
+double MeshSign::Tables::windingAt(const Vec3d& p, double* error) const {
+  const double coarse = winding->coarseQuery(p);
+  if (std::abs(coarse - 0.5) > kCoarseQueryError) return *error = kCoarseQueryError, coarse;
+  *error = kWindingQueryError;
+  return winding->query(p);
 }
 
 MeshSign::MeshSign(SignMethod method) : method_(method), tables_(std::make_unique<Tables>()) {}
@@ -510,7 +526,10 @@ Status MeshSign::build(std::vector<Vec3d> vertices, const std::vector<std::array
 bool MeshSign::inside(const Vec3d& p, uint32_t triangle, double distance) const {
   switch (method_) {
     case SignMethod::kPseudonormal: return tables_->insidePseudonormal(p, triangle, distance);
-    case SignMethod::kWinding: return tables_->winding->query(p) > 0.5;
+    case SignMethod::kWinding: {
+      double error;
+      return tables_->windingAt(p, &error) > 0.5;
+    }
     case SignMethod::kParity: return tables_->parity->inside(p);
     default: return false;
   }
@@ -635,11 +654,12 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
       const double dist = std::abs(brick.values[i]) / voxel_size;
       const double r = dist - 1.0;
       if (method_ == SignMethod::kWinding) {
-        const double w = s.winding->query(p);
+        double error;
+        const double w = s.windingAt(p, &error);
         in = w > 0.5;
         const double boundary = sites[i] == kNoSite ? 0 : brick_boundary;
         if (r > 0 && boundary > 0)
-          balls.push_back({p, r * r, in, std::abs(w - 0.5) - kWindingQueryError, 1.0 / (std::numbers::pi * boundary)});
+          balls.push_back({p, r * r, in, std::abs(w - 0.5) - error, 1.0 / (std::numbers::pi * boundary)});
       } else {
         in = s.parity->inside(p);
         if (r > 0) balls.push_back({p, r * r, in, 0, 0});
