@@ -263,14 +263,18 @@ class CellsRun {
       // only segment 0's).
       BandPart near;
       const Dist cut2 = squaredCut<Dist>(segment * (1 + 1e-6));
-      if (!bandWithin(cut2, {}, &near) || !emitBand(near.bricks, cut2, SegmentWindow{0, 0})) return false;
+      if (!bandWithin(cut2, {}, &near)) return false;
+      result_->bricks_allocated = near.held();
+      if (!emitBand(near.bricks, cut2, SegmentWindow{0, 0})) return false;
       rest.first = 1;
     }
     if (std::isinf(limit)) return emitWholeGrid(rest);
     if (!classify()) return false;
     BandPart band;
     const Dist cut2 = squaredCut<Dist>(limit);
-    return bandWithin(cut2, {}, &band) && emitBand(band.bricks, cut2, rest);
+    if (!bandWithin(cut2, {}, &band)) return false;
+    result_->bricks_allocated = band.held();
+    return emitBand(band.bricks, cut2, rest);
   }
 
  private:
@@ -280,6 +284,7 @@ class CellsRun {
     CellBricks<C> outside;
     CellBricks<Inside> inside;
     BandBricks<C, Inside> bricks;
+    int64_t held() const { return int64_t(outside.keys.size() + inside.keys.size()); }  ///< bricks holding cells
   };
 
   bool signedField() const { return !measure_.labels && measure_.inside_negative; }
@@ -339,7 +344,6 @@ class CellsRun {
       bricks.inside.push_back(part->inside.find(k));
     }
     bricks.keys = std::move(keys);
-    result_->bricks_allocated += int64_t(part->outside.keys.size() + part->inside.keys.size());
     return true;
   }
 
@@ -360,12 +364,16 @@ class CellsRun {
     const int split = firstPartEnd(cut2);
     if (split >= layers) {  // one part
       BandPart band;
-      return bandWithin(cut2, {}, &band) && emitBand(band.bricks, cut2, {});
+      if (!bandWithin(cut2, {}, &band)) return false;
+      result_->bricks_allocated = band.held();
+      return emitBand(band.bricks, cut2, {});
     }
     BandPart first, rest;
-    if (!bandWithin(cut2, {0, split}, &first) || !emitBand(first.bricks, cut2, SegmentWindow{0, 0, true}) ||
-        !bandWithin(cut2, {split, layers}, &rest))
+    if (!bandWithin(cut2, {0, split}, &first)) return false;
+    result_->bricks_allocated = first.held();
+    if (!emitBand(first.bricks, cut2, SegmentWindow{0, 0, true}) || !bandWithin(cut2, {split, layers}, &rest))
       return false;
+    result_->bricks_allocated += rest.held();
     // Both parts, in (z, y, x) order (the first part's layers come before the rest's): segment 0 of the rest, then
     // every later segment of both.
     BandBricks<C, Inside> both = std::move(first.bricks);

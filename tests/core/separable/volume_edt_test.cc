@@ -214,8 +214,11 @@ TEST(SeparableEdtTest, NearFieldFirstTheFirstSegmentComesBeforeTheRestIsComputed
     const int64_t first_part = stoppedWhen(chunked, firstChunk);
     EXPECT_GT(first_part, 0) << limit;
     EXPECT_LT(first_part, band / 4) << limit;
+    // Run to the end, both count the limit's band (the two parts' bricks, or the last band computed).
+    EXPECT_EQ(run(grid, mask, true, chunked).result.bricks_allocated, band) << limit;
     BandOptions whole_segments = chunked;
     whole_segments.max_chunk_bricks = 0;
+    EXPECT_EQ(run(grid, mask, true, whole_segments).result.bricks_allocated, band) << limit;
     const int64_t unchunked = stoppedWhen(whole_segments, segment0Complete);
     if (limit == 40) {
       EXPECT_LT(unchunked, band / 2) << "the first segment's band";
