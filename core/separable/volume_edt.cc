@@ -146,6 +146,26 @@ bool wholeGridCells(const Coord& dims, const T* labels, const BandMeasure& measu
   return !isInterrupted(interrupter);
 }
 
+/// The least and greatest distance (units) of the voxels of the brick at `origin` inside `grid` for which
+/// `squared(offset, voxel, &v)` holds, from the least and greatest v: the sources' range() (SourceHasRange), with
+/// value()'s square root, so that emitSegments sorts the bricks into the segments their voxels fall in. False when
+/// none holds.
+template <class Squared>
+bool squaredRange(const Grid& grid, const Coord& origin, const Squared& squared, double* lo, double* hi) {
+  double lo2 = std::numeric_limits<double>::infinity(), hi2 = -1;
+  for (int off = 0; off < kBrickVoxels; ++off) {
+    const Coord c = origin + brickLocal(off);
+    double v;
+    if (!grid.contains(c) || !squared(off, c, &v)) continue;
+    lo2 = std::min(lo2, v);
+    hi2 = std::max(hi2, v);
+  }
+  if (hi2 < 0) return false;
+  *lo = std::sqrt(lo2);
+  *hi = std::sqrt(hi2);
+  return true;
+}
+
 /// The whole grid: every voxel, from dense cells — the seed field's (signed: seeds from the inside cells; unsigned,
 /// a seed's cell is 0), or the multi-label EDT's (label 0 at 0, kMulti).
 template <class C, class Inside, class T, bool kMulti>
@@ -155,16 +175,28 @@ struct WholeGridSource : WholeGridBricks {
   const T* labels;
   const GridCells<C>& outside;  // the seed field's outside, or the multi-label cells
   const GridCells<Inside>& inside;
+  /// The voxel's squared distance (units), and whether its distance is negative.
+  double squared(const Coord& c, bool* negative) const {
+    const size_t v = size_t(grid.denseIndex(c));
+    *negative = !kMulti && inside_negative && labels[v];
+    if constexpr (kMulti) return labels[v] ? double(CellOps<C>::dist(outside[v])) : 0.0;
+    return *negative ? double(CellOps<Inside>::dist(inside[v])) : double(CellOps<C>::dist(outside[v]));
+  }
   bool value(size_t, int, const Coord& c, double* d) const {
     if (!grid.contains(c)) return false;
-    const size_t v = size_t(grid.denseIndex(c));
-    if constexpr (kMulti) {
-      *d = labels[v] ? std::sqrt(double(CellOps<C>::dist(outside[v]))) : 0.0;
-    } else {
-      const bool in = inside_negative && labels[v];
-      *d = in ? -std::sqrt(double(CellOps<Inside>::dist(inside[v]))) : std::sqrt(double(CellOps<C>::dist(outside[v])));
-    }
+    bool negative;
+    const double root = std::sqrt(squared(c, &negative));
+    *d = negative ? -root : root;
     return true;
+  }
+  bool range(size_t b, double* lo, double* hi) const {
+    return squaredRange(
+        grid, origin(b),
+        [&](int, const Coord& c, double* v) {
+          bool negative;
+          return *v = squared(c, &negative), true;
+        },
+        lo, hi);
   }
   int64_t feature(size_t, int, const Coord& c) const {
     const size_t v = size_t(grid.denseIndex(c));
@@ -190,21 +222,43 @@ struct BandSource {
   const T* labels;
   typename CellOps<C>::Dist cut2;
   const BandBricks<C, Inside>& bricks;
+  const std::vector<uint8_t>& mask;  // BrickClasses::mask: a brick with all labels zero or all nonzero reads none
   size_t count() const { return bricks.keys.size(); }
   Coord origin(size_t i) const { return grid.brickOrigin(int64_t(bricks.keys[i])); }
-  bool value(size_t i, int off, const Coord& c, double* d) const {
-    if (!grid.contains(c)) return false;
-    const bool labelled = labels[size_t(grid.denseIndex(c))] != 0;
+  /// Whether the voxel (inside the grid) is delivered, with its squared distance (units) and whether its distance is
+  /// negative.
+  bool squared(size_t i, int off, const Coord& c, double* v, bool* negative) const {
+    const uint8_t kind = mask[size_t(bricks.keys[i])];
+    const bool labelled = kind == separable_internal::kSomeMaskVoxels ? labels[size_t(grid.denseIndex(c))] != 0
+                                                                      : kind == separable_internal::kAllMaskVoxels;
+    *negative = false;
     if (kMulti ? !labelled : labelled) {
-      if (kMulti || !inside_negative) return *d = 0, true;
+      if (kMulti || !inside_negative) return *v = 0, true;
       // A seed of a signed field.
       const Inside* in = bricks.inside[i];
       if (!in || CellOps<Inside>::dist(in[off]) > cut2) return false;
-      return *d = -std::sqrt(double(CellOps<Inside>::dist(in[off]))), true;
+      *negative = true;
+      return *v = double(CellOps<Inside>::dist(in[off])), true;
     }
     const C* out = bricks.outside[i];
     if (!out || CellOps<C>::dist(out[off]) > cut2) return false;
-    return *d = std::sqrt(double(CellOps<C>::dist(out[off]))), true;
+    return *v = double(CellOps<C>::dist(out[off])), true;
+  }
+  bool value(size_t i, int off, const Coord& c, double* d) const {
+    double v;
+    bool negative;
+    if (!grid.contains(c) || !squared(i, off, c, &v, &negative)) return false;
+    *d = negative ? -std::sqrt(v) : std::sqrt(v);
+    return true;
+  }
+  bool range(size_t i, double* lo, double* hi) const {
+    return squaredRange(
+        grid, origin(i),
+        [&](int off, const Coord& c, double* v) {
+          bool negative;
+          return squared(i, off, c, v, &negative);
+        },
+        lo, hi);
   }
   int64_t feature(size_t i, int off, const Coord& c) const {
     const uint32_t label = labels[size_t(grid.denseIndex(c))];
@@ -350,12 +404,12 @@ class CellsRun {
   /// Streams `window` of the band `bricks` within sqrt(cut2) units.
   bool emitBand(const BandBricks<C, Inside>& bricks, Dist cut2, SegmentWindow window) {
     if (measure_.labels)
-      return separable_internal::emitSegments(grid_, options_,
-                                              BandSource<C, Inside, T, true>{grid_, false, labels_, cut2, bricks},
-                                              result_, on_segment_, window);
+      return separable_internal::emitSegments(
+          grid_, options_, BandSource<C, Inside, T, true>{grid_, false, labels_, cut2, bricks, classes_.mask}, result_,
+          on_segment_, window);
     return separable_internal::emitSegments(
-        grid_, options_, BandSource<C, Inside, T, false>{grid_, signedField(), labels_, cut2, bricks}, result_,
-        on_segment_, window);
+        grid_, options_, BandSource<C, Inside, T, false>{grid_, signedField(), labels_, cut2, bricks, classes_.mask},
+        result_, on_segment_, window);
   }
 
   /// The band within the limit (sqrt(cut2) units) in two parts along z (see run()).

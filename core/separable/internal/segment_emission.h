@@ -6,11 +6,11 @@
 // options.max_chunk_bricks with the last one marked complete, the final segment marked last; per-segment stats are
 // appended to `result`. `Source` lists the bricks in (z, y, x) order:
 //   size_t count(); Coord origin(i); bool value(i, offset, voxel, double* d) — true when the voxel is delivered, with
-//   its signed distance d in voxels (called from many threads, twice per voxel: once to sort bricks into segments,
-//   once to fill them); optionally `static constexpr bool kHasFeatures = true` and int64_t feature(i, offset, voxel),
+//   its signed distance d in voxels (called from many threads, once per voxel to fill the bricks, and once more to
+//   sort them into segments unless the source has range()); optionally `static constexpr bool kHasFeatures = true` and int64_t feature(i, offset, voxel),
 //   the voxel's closest feature (Brick::closest, with options.closest_features; asking a source without features
-//   throws std::invalid_argument). Returns false when options.interrupter stopped it (polled per 64 bricks while
-//   sorting, per 16 while filling, and per chunk).
+//   throws std::invalid_argument); optionally bool range(i, double* lo, double* hi) (SourceHasRange). Returns false
+//   when options.interrupter stopped it (polled per 64 bricks while sorting, per 16 while filling, and per chunk).
 // `window` streams only segments [window.first, window.last] of the field, so one run can deliver its near field from
 // one source and the rest from another: a closed window never marks a segment last; an open one (last = kOpen)
 // starting past 0 marks its final segment last, and when nothing lies in it, delivers an empty segment window.first
@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <concepts>
 #include <cstdint>
 #include <iterator>
 #include <limits>
@@ -45,6 +46,14 @@ template <typename Source, typename = void>
 struct SourceHasFeatures : std::false_type {};
 template <typename Source>
 struct SourceHasFeatures<Source, std::enable_if_t<Source::kHasFeatures>> : std::true_type {};
+
+/// Whether `Source` has `bool range(i, double* lo, double* hi)`: the least and greatest |distance| (voxels) of the
+/// voxels brick i delivers, false when it delivers none — how bricks are sorted into segments without a square root
+/// per voxel (the distances must be value()'s, so that the segments are the same).
+template <typename Source>
+inline constexpr bool SourceHasRange = requires(const Source& s, double* d) {
+  { s.range(size_t{0}, d, d) } -> std::same_as<bool>;
+};
 
 /// The brick list of a whole-grid source: every brick of the grid, in (z, y, x) order.
 struct WholeGridBricks {
@@ -86,8 +95,21 @@ bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source
   tbb::parallel_for(tbb::blocked_range<size_t>(0, bricks, 64), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t b = r.begin(); b != r.end(); ++b) {
       if ((b & 63) == 0 && isInterrupted(interrupter)) return;
-      const Coord origin = source.origin(b);
       int lo = kNone, hi = -1;
+      if constexpr (SourceHasRange<Source>) {
+        double d_lo, d_hi;
+        if (source.range(b, &d_lo, &d_hi)) {
+          // Every segment from the nearest voxel's to the farthest's: one may hold none of its voxels (the fill below
+          // drops a brick without any), but no segment is missed.
+          lo = std::max(segmentOf(d_lo), window.first);
+          hi = std::min(segmentOf(d_hi), window.last);
+          if (lo > hi) lo = kNone, hi = -1;
+        }
+        first[b] = lo;
+        last[b] = hi;
+        continue;
+      }
+      const Coord origin = source.origin(b);
       for (int off = 0; off < kBrickVoxels; ++off) {
         double d;
         if (!source.value(b, off, origin + brickLocal(off), &d)) continue;
