@@ -438,7 +438,9 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
                        z = size_t(run.other[1]) * kBrickSize + size_t(w);
           const T* row = labels + (z * size_t(dims.y) + y) * size_t(dims.x) + size_t(x0);
           const int line = base + w * kStride[2];
-          auto at = [&](int i) -> C& { return values[i / kBrickSize][line + (i % kBrickSize) * kStride[0]]; };
+          auto at = [&](int i) -> C& {  // i >= 0: unsigned, so / and % are shifts
+            return values[unsigned(i) / kBrickSize][line + (unsigned(i) % kBrickSize) * kStride[0]];
+          };
           if (multi) {
             otherLabelLine<C, T>(row, length, knownLabels(0, x0, length), nullptr, s.d.data(), w2[0], s.runs);
             for (int i = 0; i < length; ++i) at(i) = keep(s.d[size_t(i)]);
@@ -581,8 +583,9 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
     const bool ok = forEachLines<C, T>(
         runs, axis, dims, reach, pool, arena, interrupter,
         [&](size_t ri, int u, int base, int w_end, int length, C* const* values, LineScratch<C, T>& s) {
-          auto at = [&](int i, int w) -> C& {
-            return values[i / kBrickSize][base + w * kStride[o1] + (i % kBrickSize) * kStride[axis]];
+          auto at = [&](int i, int w) -> C& {  // i >= 0: unsigned, so / and % are shifts
+            return values[unsigned(i) / kBrickSize]
+                         [base + w * kStride[o1] + (unsigned(i) % kBrickSize) * kStride[axis]];
           };
           if constexpr (!Ops::kTagged) {  // nearest labels are the seed field's only
             if (window && multi) {
@@ -616,12 +619,20 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
           const int start = run.lo * kBrickSize;
           const KnownLabels known = multi ? knownLabels(axis, start, length) : KnownLabels{};
           if (multi && u == 0) gatherRunLabels(run, known, w_end, length, s);
+          // Line w's cells, brick by brick: fn(i, cell) for i < length.
+          auto forLine = [&](int w, const auto& fn) {
+            const int step = kStride[axis];
+            for (int b = 0, i = 0; i < length; ++b) {
+              C* p = values[b] + base + w * kStride[o1];
+              for (const int e = std::min(length, i + kBrickSize); i < e; ++i, p += step) fn(i, *p);
+            }
+          };
           for (int w = 0; w < w_end; ++w) {
             bool any = false;
-            for (int i = 0; i < length; ++i) {
-              s.f[size_t(i)] = at(i, w);
-              any |= !Ops::isFar(s.f[size_t(i)]);
-            }
+            forLine(w, [&](int i, const C& c) {
+              s.f[size_t(i)] = c;
+              any |= !Ops::isFar(c);
+            });
             if (!any && !multi) continue;  // multi-label: the run ends along this line count without any value
             if (multi) {
               // The line's labels, `known` beyond its ends, from the run's block.
@@ -632,7 +643,7 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
             } else {
               parabolaEnvelope(s.f.data(), s.d.data(), length, wa, s.v.data(), s.z.data());
             }
-            for (int i = 0; i < length; ++i) at(i, w) = keep(s.d[size_t(i)]);
+            forLine(w, [&](int i, C& c) { c = keep(s.d[size_t(i)]); });
           }
         });
     if (!ok) return false;
