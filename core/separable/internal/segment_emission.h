@@ -97,17 +97,19 @@ bool emitSegments(const Grid& grid, const FieldRunOptions& options, const Source
       if ((b & 63) == 0 && isInterrupted(interrupter)) return;
       int lo = kNone, hi = -1;
       if constexpr (SourceHasRange<Source>) {
-        double d_lo, d_hi;
-        if (source.range(b, &d_lo, &d_hi)) {
-          // Every segment from the nearest voxel's to the farthest's: one may hold none of its voxels (the fill below
-          // drops a brick without any), but no segment is missed.
-          lo = std::max(segmentOf(d_lo), window.first);
-          hi = std::min(segmentOf(d_hi), window.last);
-          if (lo > hi) lo = kNone, hi = -1;
+        if (length > 0) {  // one segment: the loop below stops at the first voxel delivered
+          double d_lo, d_hi;
+          if (source.range(b, &d_lo, &d_hi)) {
+            // Every segment from the nearest voxel's to the farthest's: one may hold none of its voxels (the fill
+            // below drops a brick without any), but no segment is missed.
+            lo = std::max(segmentOf(d_lo), window.first);
+            hi = std::min(segmentOf(d_hi), window.last);
+            if (lo > hi) lo = kNone, hi = -1;
+          }
+          first[b] = lo;
+          last[b] = hi;
+          continue;
         }
-        first[b] = lo;
-        last[b] = hi;
-        continue;
       }
       const Coord origin = source.origin(b);
       for (int off = 0; off < kBrickVoxels; ++off) {
