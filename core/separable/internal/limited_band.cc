@@ -493,8 +493,8 @@ bool cellsWithin(const Grid& grid, const T* labels, const BrickClasses& classes,
       const int end = length + known.after;
       for (int i = -known.before; i < end; ++i) {
         const T* p = corner + int64_t(start + i) * step;
-        if (i + kGatherAhead <
-            end)  // each row is a cache line of its own, a slice or a row apart: no hardware prefetch
+        // Each row is a cache line of its own, a slice or a row apart: no hardware prefetcher follows them.
+        if (i + kGatherAhead < end)
           for (int w = 0; w < w_end; ++w) __builtin_prefetch(p + kGatherAhead * step + w * w_step);
         T* to = s.block.data() + size_t(i + reach) * kBrickSize * kBrickSize;
         for (int w = 0; w < w_end; ++w)

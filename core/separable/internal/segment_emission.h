@@ -7,10 +7,11 @@
 // appended to `result`. `Source` lists the bricks in (z, y, x) order:
 //   size_t count(); Coord origin(i); bool value(i, offset, voxel, double* d) — true when the voxel is delivered, with
 //   its signed distance d in voxels (called from many threads, once per voxel to fill the bricks, and once more to
-//   sort them into segments unless the source has range()); optionally `static constexpr bool kHasFeatures = true` and int64_t feature(i, offset, voxel),
-//   the voxel's closest feature (Brick::closest, with options.closest_features; asking a source without features
-//   throws std::invalid_argument); optionally bool range(i, double* lo, double* hi) (SourceHasRange). Returns false
-//   when options.interrupter stopped it (polled per 64 bricks while sorting, per 16 while filling, and per chunk).
+//   sort them into segments unless the source has range()); optionally `static constexpr bool kHasFeatures = true`
+//   and int64_t feature(i, offset, voxel), the voxel's closest feature (Brick::closest, with
+//   options.closest_features; asking a source without features throws std::invalid_argument); optionally
+//   bool range(i, double* lo, double* hi) (SourceHasRange). Returns false when options.interrupter stopped it (polled
+//   per 64 bricks while sorting, per 16 while filling, and per chunk).
 // `window` streams only segments [window.first, window.last] of the field, so one run can deliver its near field from
 // one source and the rest from another: a closed window never marks a segment last; an open one (last = kOpen)
 // starting past 0 marks its final segment last, and when nothing lies in it, delivers an empty segment window.first
