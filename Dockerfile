@@ -32,14 +32,15 @@ COPY server server
 COPY client client
 COPY bench bench
 COPY tests tests
+COPY scripts/ccache-compile scripts/ccache-compile
 # --as-needed (Debian's gcc default, explicit for other toolchains): the server and the probe record only the
 # libraries they call, not libblosc/libpng that the core library's link interface lists.
 # ccache (in the build group) compiles only where /ccache is mounted: `scripts/container build` lends the host's
-# cache there, which scripts/build filled with the same files compiled in the same way (paths hashed relative to the
-# source tree, hence the build tree inside /src); a plain `docker build` compiles everything.
+# cache there, which scripts/build filled with the same files compiled the same way (scripts/ccache-compile: paths
+# hashed relative to the source tree, hence the build tree inside /src); a plain `docker build` compiles everything.
 RUN if [ -d /ccache ]; then export CCACHE_DIR=/ccache && ccache --zero-stats >/dev/null; else export CCACHE_DISABLE=1; fi \
  && cmake -S . -B /src/build -G Ninja -DCMAKE_BUILD_TYPE=Release -DDISTBAND_BUILD_TESTS=OFF \
-          "-DCMAKE_CXX_COMPILER_LAUNCHER=env;CCACHE_BASEDIR=/src;CCACHE_COMPILERCHECK=content;ccache" \
+          -DCMAKE_CXX_COMPILER_LAUNCHER=/src/scripts/ccache-compile \
           -DCMAKE_EXE_LINKER_FLAGS="-Wl,--as-needed" >/dev/null \
  && cmake --build /src/build --target distband-server distband-health -j"$(nproc)" \
  && if [ -d /ccache ]; then echo "ccache (the host's): $(ccache --print-stats | grep -E '^(direct|preprocessed)_cache_hit|^cache_miss' | tr '\n' ' ')"; fi \
