@@ -135,7 +135,13 @@ bool DistbandServer::shutdown(std::chrono::milliseconds grace) {
     spdlog::info("grace period over: cancelling {} calls", service_->activeCalls());
     service_->stopAll(Status::Unavailable("the server is shutting down"));
   }
-  server_->Shutdown(std::chrono::system_clock::now());  // cancels calls gRPC still holds (e.g. unmatched ones)
+  // A handler that has returned may still have its last messages and status queued in gRPC: drained calls keep the
+  // rest of the grace period to deliver them (a finished result is never cut off), cancelled ones none.
+  const auto steady_left =
+      drained ? std::max(deadline - std::chrono::steady_clock::now(), std::chrono::steady_clock::duration::zero())
+              : std::chrono::steady_clock::duration::zero();
+  server_->Shutdown(std::chrono::system_clock::now() +
+                    std::chrono::duration_cast<std::chrono::system_clock::duration>(steady_left));
   server_->Wait();
   spdlog::info("shutdown complete ({})", drained ? "drained" : "calls cancelled");
   return drained;
