@@ -46,7 +46,11 @@ namespace {
 Status buildSign(const TriangleMesh& mesh, SignMethod method, const Interrupter* interrupter,
                  std::shared_ptr<const MeshSign>* out) {
   std::unique_ptr<MeshSign> sign;
-  if (Status s = MeshSign::build(mesh.vertices, mesh.triangles, method, interrupter, &sign); !s.ok()) return s;
+  if (Status s = MeshSign::build(std::make_shared<const std::vector<Vec3d>>(mesh.vertices),
+                                 std::make_shared<const std::vector<std::array<uint32_t, 3>>>(mesh.triangles), method,
+                                 interrupter, &sign);
+      !s.ok())
+    return s;
   *out = std::move(sign);
   return Status::Ok();
 }

@@ -147,23 +147,19 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
   TriangleMesh sub;
   std::vector<uint32_t> chosen;
   if (Status s = chooseTriangles(grid, whole_mesh, options, &sub, &chosen); !s.ok()) return s;
-  const TriangleMesh& mesh = chosen.empty() ? whole_mesh : sub;
+  const TriangleMesh& mesh = chosen.empty() ? whole_mesh : sub;  // until its triangles become the sites' below
   const size_t nt = mesh.triangles.size();
 
-  // Unit-space copies (core/grid.h), in parallel: serial, these loops were ~20 ms of a 52 k-triangle mesh's seeds.
-  std::vector<Vec3d> verts(mesh.vertices.size());  // unit space
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, verts.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t v = r.begin(); v != r.end(); ++v) verts[v] = grid.unitsOf(mesh.vertices[v]);
+  // The triangle sites: unit-space vertices (core/grid.h; in parallel: serial, this loop was ~20 ms of a 52 k-triangle
+  // mesh's seeds) and the triangles' vertex ids, shared with the sign's tables.
+  auto verts = std::make_shared<std::vector<Vec3d>>(mesh.vertices.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, verts->size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t v = r.begin(); v != r.end(); ++v) (*verts)[v] = grid.unitsOf(mesh.vertices[v]);
   });
-  std::vector<std::array<Vec3d, 3>> tris(nt);
-  std::vector<Vec3d> normals(nt);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, nt, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    if (tbb::is_current_task_group_canceling()) return;
-    for (size_t t = r.begin(); t != r.end(); ++t) {
-      for (int k = 0; k < 3; ++k) tris[t][k] = verts[mesh.triangles[t][k]];
-      normals[t] = normalized((tris[t][1] - tris[t][0]).cross(tris[t][2] - tris[t][0]));
-    }
-  });
+  auto corners = chosen.empty() ? std::make_shared<std::vector<TriangleSites::Corners>>(mesh.triangles)
+                                : std::make_shared<std::vector<TriangleSites::Corners>>(std::move(sub.triangles));
+  std::vector<Vec3d>().swap(sub.vertices);
+  const TriangleSites tris(verts, corners);
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   // The band's radius in units: on an anisotropic grid a voxel step along an axis is up to maxAxisScale() units, and
   // the band must hold voxels on both sides of the surface along every axis.
@@ -175,7 +171,7 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
 
   // Voxel box of each triangle's radius-neighbourhood, clipped to the grid (lo > hi: nothing to scan).
   auto voxelBox = [&](size_t t, Coord* lo, Coord* hi) {
-    const auto& tri = tris[t];
+    const std::array<Vec3d, 3> tri = tris[t];
     auto range = [&](double a, double b, double c, double s, int n, int32_t* l, int32_t* h) {
       const double mn = std::min({a, b, c}) - radius, mx = std::max({a, b, c}) + radius;  // units
       *l = static_cast<int32_t>(std::max(0.0, std::ceil(scaled ? mn / s : mn)));
@@ -239,9 +235,9 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
       voxelBox(t, &lo, &hi);
       lo = {std::max(lo.x, borg.x), std::max(lo.y, borg.y), std::max(lo.z, borg.z)};
       hi = {std::min(hi.x, borg.x + 7), std::min(hi.y, borg.y + 7), std::min(hi.z, borg.z + 7)};
-      const auto& tri = tris[t];
+      const std::array<Vec3d, 3> tri = tris[t];
       const TriangleDistance dist(tri[0], tri[1], tri[2]);
-      const Vec3d n = normals[t];
+      const Vec3d n = normalized((tri[1] - tri[0]).cross(tri[2] - tri[0]));
       const double plane0 = n.dot(tri[0]);
       const double bx0 = std::min({tri[0].x, tri[1].x, tri[2].x}), bx1 = std::max({tri[0].x, tri[1].x, tri[2].x});
       const double by0 = std::min({tri[0].y, tri[1].y, tri[2].y}), by1 = std::max({tri[0].y, tri[1].y, tri[2].y});
@@ -292,7 +288,6 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
     scaled ? scanBrick(b, std::true_type{}) : scanBrick(b, std::false_type{});
   });
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
-  std::vector<Vec3d>().swap(normals);  // the scan's alone: not held while the sign tables are built
   const size_t scratch_bytes = cand.size() * sizeof(Candidate);
   std::vector<Candidate>().swap(cand);
   std::vector<size_t> band_at(nbricks + 1, 0);
@@ -332,7 +327,7 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
     tbb::parallel_for(size_t(0), seeds.band.size(), [&](size_t i) {
       if (tbb::is_current_task_group_canceling()) return;
       BandVoxel& bv = seeds.band[i];
-      const auto& tri = tris[bv.site];
+      const std::array<Vec3d, 3> tri = tris[bv.site];
       const Vec3d p{bv.voxel.x * scale.x, bv.voxel.y * scale.y, bv.voxel.z * scale.z};  // units
       seeds.points[i] = closestPointOnTriangle(p, tri[0], tri[1], tri[2]);
       if (!site_triangle->empty()) (*site_triangle)[i] = bv.site;
@@ -346,8 +341,7 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
   if (options.sign != SignMethod::kUnsigned) {
     std::unique_ptr<MeshSign> built;
-    if (Status s = MeshSign::build(std::move(verts), mesh.triangles, options.sign, interrupter, &built); !s.ok())
-      return s;
+    if (Status s = MeshSign::build(verts, corners, options.sign, interrupter, &built); !s.ok()) return s;
     std::shared_ptr<const MeshSign> sign = std::move(built);
     const double voxel_size = grid.voxelSize();
     if (site_triangle->empty()) site_triangle.reset();
@@ -365,7 +359,7 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
       return SignShares{at(0), at(1), at(2), at(3)};
     };
   }
-  if (seeds.kind == SiteKind::kTriangle) seeds.triangles = std::move(tris);
+  if (seeds.kind == SiteKind::kTriangle) seeds.triangles = tris;
   // The scan's temporaries (as large as the band) were freed in the worker threads' malloc arenas, which keep
   // the pages; when that is a sizeable amount, hand them back so the engine's bricks do not come on top of them.
   if (scratch_bytes + seeds.band.size() * sizeof(BandVoxel) >= (size_t(64) << 20)) ::malloc_trim(0);

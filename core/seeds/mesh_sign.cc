@@ -6,6 +6,8 @@
 #include <limits>
 #include <mutex>
 #include <numbers>
+#include <span>
+#include <stdexcept>
 #include <tuple>
 #include <unordered_map>
 
@@ -199,9 +201,18 @@ constexpr double kCoarseQueryError = 0.1;
 
 // Everything a method's test needs, immutable once built.
 struct MeshSign::Tables {
-  std::vector<Vec3d> verts;                        // the caller's frame
-  std::vector<std::array<uint32_t, 3>> corners;    // mesh vertex ids
-  std::vector<Normal3f> face_n, edge_n, vertex_n;  // pseudonormals (edge_n: 3 per triangle)
+  std::shared_ptr<const std::vector<Vec3d>> vert_table;  // shared with the caller (its triangle sites)
+  std::shared_ptr<const std::vector<std::array<uint32_t, 3>>> corner_table;
+  std::span<const Vec3d> verts;                      // the caller's frame
+  std::span<const std::array<uint32_t, 3>> corners;  // mesh vertex ids
+  std::vector<Normal3f> face_n, vertex_n;            // pseudonormals
+  /// Edge pseudonormals, through each half-edge's (3 per triangle) other triangle: a manifold edge's normal is computed
+  /// where needed from its two faces (4 bytes a half-edge where a float normal took 12: a third of a big mesh's sign
+  /// tables). kLoneEdge: a boundary edge (its face's normal); kManyUses: an edge of three or more uses, or used twice
+  /// by one triangle, whose normal `shared_edge_n` keeps by half-edge (rare).
+  static constexpr uint32_t kLoneEdge = std::numeric_limits<uint32_t>::max(), kManyUses = kLoneEdge - 1;
+  std::vector<uint32_t> edge_mate;
+  std::vector<std::pair<uint64_t, Normal3f>> shared_edge_n;  // sorted by half-edge 3 t + e
   std::unique_ptr<WindingNumber> winding;
   std::unique_ptr<ParityScene> parity;
   uint64_t triangles = 0;
@@ -230,14 +241,38 @@ struct MeshSign::Tables {
     Normal3f n;
     switch (f) {
       case TriangleFeature::kFace: n = face_n[t]; break;
-      case TriangleFeature::kEdgeAB: n = edge_n[3 * t + 0]; break;
-      case TriangleFeature::kEdgeBC: n = edge_n[3 * t + 1]; break;
-      case TriangleFeature::kEdgeCA: n = edge_n[3 * t + 2]; break;
+      case TriangleFeature::kEdgeAB:
+        n = edgeNormal(t, 0);
+        break;
+      case TriangleFeature::kEdgeBC:
+        n = edgeNormal(t, 1);
+        break;
+      case TriangleFeature::kEdgeCA:
+        n = edgeNormal(t, 2);
+        break;
       case TriangleFeature::kVertexA: n = vertex_n[corners[t][0]]; break;
       case TriangleFeature::kVertexB: n = vertex_n[corners[t][1]]; break;
       case TriangleFeature::kVertexC: n = vertex_n[corners[t][2]]; break;
     }
     return n.dot(p - cp) < 0;
+  }
+
+  /// Triangle t's unit normal in double precision.
+  Vec3d faceNormal(size_t t) const {
+    const auto& c = corners[t];
+    return normalized((verts[c[1]] - verts[c[0]]).cross(verts[c[2]] - verts[c[0]]));
+  }
+  /// The pseudonormal of triangle t's edge e (from corner e to e + 1): the normalized sum of the normals of the
+  /// triangles that have it, in triangle order (a triangle with the edge twice counts twice).
+  Normal3f edgeNormal(uint32_t t, int e) const {
+    const uint32_t mate = edge_mate[3 * size_t(t) + size_t(e)];
+    if (mate == kLoneEdge) return Normal3f(normalized(Vec3d{} + faceNormal(t)));
+    if (mate == kManyUses)
+      return std::lower_bound(shared_edge_n.begin(), shared_edge_n.end(), 3 * uint64_t(t) + uint64_t(e),
+                              [](const auto& entry, uint64_t key) { return entry.first < key; })
+          ->second;
+    const uint32_t first = std::min(t, mate), second = std::max(t, mate);
+    return Normal3f(normalized(Vec3d{} + faceNormal(first) + faceNormal(second)));
   }
 
   void buildPseudonormals(const Interrupter* interrupter);
@@ -259,11 +294,6 @@ struct MeshSign::Tables {
 void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
   const size_t nt = corners.size(), nv = verts.size();
   auto stop = [&](size_t i) { return (i & 0xFFFF) == 0 && isInterrupted(interrupter); };
-  // Triangle t's unit normal in double precision; computed again where needed rather than kept (24 bytes a triangle).
-  auto faceNormal = [&](size_t t) {
-    const auto& c = corners[t];
-    return normalized((verts[c[1]] - verts[c[0]]).cross(verts[c[2]] - verts[c[0]]));
-  };
   face_n.resize(nt);
   {
     std::vector<Vec3d> face(nt);
@@ -312,23 +342,45 @@ void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
         if (firstUse(t, k)) around[next[corners[t][k]]++] = uint32_t(t);
     }
   }
-  edge_n.resize(3 * nt);
+  // Each half-edge's other triangle; edges of one use by two triangles or of three or more uses are marked, then
+  // their normals computed (in triangle order, as edgeNormal does) in a serial pass: few meshes have any.
+  edge_mate.assign(3 * nt, kLoneEdge);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, nt, 1024), [&](const tbb::blocked_range<size_t>& r) {
     if (tbb::is_current_task_group_canceling()) return;
     for (size_t t = r.begin(); t != r.end(); ++t)
       for (int e = 0; e < 3; ++e) {
         const uint32_t a = std::min(corners[t][e], corners[t][(e + 1) % 3]);
         const uint32_t b = std::max(corners[t][e], corners[t][(e + 1) % 3]);
-        Vec3d sum{};
+        int uses = 0;
+        uint32_t other = kLoneEdge;
         for (uint32_t i = first[a]; i < first[a + 1]; ++i) {
           const auto& c = corners[around[i]];
           for (int f = 0; f < 3; ++f)
-            if (std::min(c[f], c[(f + 1) % 3]) == a && std::max(c[f], c[(f + 1) % 3]) == b)
-              sum = sum + faceNormal(around[i]);
+            if (std::min(c[f], c[(f + 1) % 3]) == a && std::max(c[f], c[(f + 1) % 3]) == b) {
+              ++uses;
+              if (around[i] != t) other = around[i];
+            }
         }
-        edge_n[3 * t + e] = Normal3f(normalized(sum));
+        edge_mate[3 * t + e] = uses == 1 ? kLoneEdge : uses == 2 && other != kLoneEdge ? other : kManyUses;
       }
   });
+  if (isInterrupted(interrupter)) return;
+  for (size_t t = 0; t < nt; ++t) {
+    if (stop(t)) return;
+    for (int e = 0; e < 3; ++e) {
+      if (edge_mate[3 * t + e] != kManyUses) continue;
+      const uint32_t a = std::min(corners[t][e], corners[t][(e + 1) % 3]);
+      const uint32_t b = std::max(corners[t][e], corners[t][(e + 1) % 3]);
+      Vec3d sum{};
+      for (uint32_t i = first[a]; i < first[a + 1]; ++i) {
+        const auto& c = corners[around[i]];
+        for (int f = 0; f < 3; ++f)
+          if (std::min(c[f], c[(f + 1) % 3]) == a && std::max(c[f], c[(f + 1) % 3]) == b)
+            sum = sum + faceNormal(around[i]);
+      }
+      shared_edge_n.emplace_back(3 * uint64_t(t) + uint64_t(e), Normal3f(normalized(sum)));
+    }
+  }
 }
 
 // The boundary curves in the grid's index frame (built on the first signed brick), cut into pieces no longer than
@@ -475,44 +527,51 @@ double MeshSign::Tables::windingAt(const Vec3d& p, double* error) const {
 MeshSign::MeshSign(SignMethod method) : method_(method), tables_(std::make_unique<Tables>()) {}
 MeshSign::~MeshSign() = default;
 
-Status MeshSign::build(std::vector<Vec3d> vertices, const std::vector<std::array<uint32_t, 3>>& triangles,
-                       SignMethod method, const Interrupter* interrupter, std::unique_ptr<MeshSign>* out) {
+Status MeshSign::build(std::shared_ptr<const std::vector<Vec3d>> vertices,
+                       std::shared_ptr<const std::vector<std::array<uint32_t, 3>>> triangles, SignMethod method,
+                       const Interrupter* interrupter, std::unique_ptr<MeshSign>* out) {
   if (method != SignMethod::kPseudonormal && method != SignMethod::kWinding && method != SignMethod::kParity)
     return Status::InvalidArgument(
         fmt::format("a mesh sign is built for pseudonormal, winding or parity (got {})", signMethodName(method)));
-  for (const auto& t : triangles)
+  if (!vertices || !triangles) throw std::invalid_argument("MeshSign::build: no vertex or triangle table");
+  for (const auto& t : *triangles)
     for (uint32_t i : t)
-      if (i >= vertices.size()) return Status::InvalidArgument("a triangle refers to a vertex that does not exist");
+      if (i >= vertices->size()) return Status::InvalidArgument("a triangle refers to a vertex that does not exist");
   std::unique_ptr<MeshSign> sign(new MeshSign(method));
   Tables& tables = *sign->tables_;
-  tables.triangles = triangles.size();
+  tables.triangles = triangles->size();
+  auto keepTables = [&] {
+    tables.vert_table = std::move(vertices);
+    tables.corner_table = std::move(triangles);
+    tables.verts = *tables.vert_table;
+    tables.corners = *tables.corner_table;
+  };
   if (method == SignMethod::kPseudonormal) {
-    tables.verts = std::move(vertices);
-    tables.corners = triangles;
+    keepTables();
     tables.buildPseudonormals(interrupter);
   } else {
-    std::vector<std::array<Vec3d, 3>> tris(triangles.size());
+    const std::vector<Vec3d>& v = *vertices;
+    const std::vector<std::array<uint32_t, 3>>& c = *triangles;
+    std::vector<std::array<Vec3d, 3>> tris(c.size());
     tbb::parallel_for(tbb::blocked_range<size_t>(0, tris.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t t = r.begin(); t != r.end(); ++t)
-        for (int k = 0; k < 3; ++k) tris[t][k] = vertices[triangles[t][k]];
+        for (int k = 0; k < 3; ++k) tris[t][k] = v[c[t][k]];
     });
     if (method == SignMethod::kWinding) {
       // Each triangle's part, for the certificate, when there are several.
       std::vector<uint32_t> vertex_part;
-      if (findMeshParts(vertices.size(), triangles, &vertex_part, interrupter) > 1) {
-        tables.part.resize(triangles.size());
-        for (size_t t = 0; t < triangles.size(); ++t) tables.part[t] = vertex_part[triangles[t][0]];
+      if (findMeshParts(v.size(), c, &vertex_part, interrupter) > 1) {
+        tables.part.resize(c.size());
+        for (size_t t = 0; t < c.size(); ++t) tables.part[t] = vertex_part[c[t][0]];
       }
       std::vector<uint32_t>().swap(vertex_part);
       if (!isInterrupted(interrupter))
         tables.winding = std::make_unique<WindingNumber>(std::move(tris), 2.0, interrupter);
       // The certificate that signs most bricks with one query (signWindingCertified) reads pseudonormals, and each
       // triangle's distance from the boundary, built in the grid's frame on the first signed brick.
-      tables.verts = std::move(vertices);
-      tables.corners = triangles;
+      keepTables();
       if (!isInterrupted(interrupter)) tables.buildPseudonormals(interrupter);
     } else {
-      std::vector<Vec3d>().swap(vertices);
       tables.parity = std::make_unique<ParityScene>(tris, interrupter);
       if (!isInterrupted(interrupter) && !tables.parity->ok())
         return Status::Internal("cannot create the Embree device for parity signs");
@@ -673,9 +732,10 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
 
 uint64_t MeshSign::memoryBytes() const {
   const Tables& t = *tables_;
-  uint64_t bytes = sizeof(MeshSign) + sizeof(Tables) + t.verts.capacity() * sizeof(Vec3d) +
-                   t.corners.capacity() * sizeof(t.corners[0]) +
-                   (t.face_n.capacity() + t.edge_n.capacity() + t.vertex_n.capacity()) * sizeof(Normal3f) +
+  uint64_t bytes = sizeof(MeshSign) + sizeof(Tables) + t.verts.size() * sizeof(Vec3d) +
+                   t.corners.size() * sizeof(t.corners[0]) +
+                   (t.face_n.capacity() + t.vertex_n.capacity()) * sizeof(Normal3f) +
+                   t.edge_mate.capacity() * sizeof(uint32_t) + t.shared_edge_n.capacity() * sizeof(t.shared_edge_n[0]) +
                    t.boundary_pieces.capacity() * sizeof(Tables::BoundaryPiece) +
                    t.boundary_cells.size() * (sizeof(Coord) + 2 * sizeof(void*) + sizeof(std::vector<uint32_t>)) +
                    t.boundary_pieces.size() * sizeof(uint32_t) + t.part.capacity() * sizeof(uint32_t);
@@ -690,7 +750,8 @@ uint64_t MeshSign::estimateBytes(SignMethod method, uint64_t vertices, uint64_t 
       // Kept: vertices, corners and normals; while building, first face normals, angles and vertex sums, then (after
       // those are freed) each vertex's triangles, a third of that.
       return vertices * (sizeof(Vec3d) * 2 + sizeof(Normal3f)) +
-             triangles * (sizeof(std::array<uint32_t, 3>) + 4 * sizeof(Normal3f) + sizeof(Vec3d) + 3 * sizeof(double));
+             triangles * (sizeof(std::array<uint32_t, 3>) + sizeof(Normal3f) + 3 * sizeof(uint32_t) + sizeof(Vec3d) +
+                          3 * sizeof(double));
     case SignMethod::kWinding:
       // The triangles, twice while the tree is built, about two nodes per leaf of a few triangles, and each
       // triangle's part.

@@ -65,8 +65,11 @@ class MeshSign {
  public:
   /// `method` must be kPseudonormal, kWinding or kParity. kInvalidArgument for another method or a corner out of
   /// range, kInternal when Embree cannot be started (parity), the interrupter's status when it stopped the build.
-  static Status build(std::vector<Vec3d> vertices, const std::vector<std::array<uint32_t, 3>>& triangles,
-                      SignMethod method, const Interrupter* interrupter, std::unique_ptr<MeshSign>* out);
+  /// The pseudonormal and winding signs keep `vertices` and `triangles` (shared: the mesh seeds' triangle sites are
+  /// the same tables).
+  static Status build(std::shared_ptr<const std::vector<Vec3d>> vertices,
+                      std::shared_ptr<const std::vector<std::array<uint32_t, 3>>> triangles, SignMethod method,
+                      const Interrupter* interrupter, std::unique_ptr<MeshSign>* out);
   ~MeshSign();
   MeshSign(const MeshSign&) = delete;
   MeshSign& operator=(const MeshSign&) = delete;

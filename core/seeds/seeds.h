@@ -2,8 +2,8 @@
 // Contract: a seed source (points, volume, mesh: see core/seeds/) builds a Seeds for one Grid. The engine reads
 // it without modifying it, from many threads at once.
 //   * A *site* is a closest-feature candidate. kPoint sites are positions in unit space (core/grid.h: index space on a
-//     cubic grid, voxel units); kTriangle sites are triangles (unit space) and a voxel's distance to one is the exact
-//     point–triangle distance.
+//     cubic grid, voxel units); kTriangle sites are triangles (unit space, TriangleSites) and a voxel's distance to
+//     one is the exact point–triangle distance.
 //   * `band` lists the voxels the propagation starts from, each with its site; the engine computes their
 //     distances from the site itself. kNoSite marks a voxel whose distance is 0 and that offers nothing to its
 //     neighbours (the interior of a seed volume). With `band_exact` the band's sites are final.
@@ -56,6 +56,38 @@ struct SignShares {
   friend bool operator==(const SignShares&, const SignShares&) = default;
 };
 
+/// Triangle sites: unit-space vertices and each triangle's three vertex ids, shared (with the mesh's sign tables) and
+/// immutable. 36 bytes a triangle and 24 a vertex where three copied corners took 72 a triangle, the largest table of
+/// a multi-million-triangle mesh's run. Copies share the tables.
+class TriangleSites {
+ public:
+  using Corners = std::array<uint32_t, 3>;
+  TriangleSites() = default;
+  /// Every corner must name one of `vertices` (the mesh seeds check this first).
+  TriangleSites(std::shared_ptr<const std::vector<Vec3d>> vertices, std::shared_ptr<const std::vector<Corners>> corners)
+      : vertices_(std::move(vertices)),
+        corners_(std::move(corners)),
+        v_(vertices_->data()),
+        c_(corners_->data()),
+        count_(corners_->size()) {}
+  size_t size() const { return count_; }
+  bool empty() const { return count_ == 0; }
+  /// Triangle t's corners (t < size()).
+  [[gnu::always_inline]] std::array<Vec3d, 3> operator[](size_t t) const {
+    const Corners& c = c_[t];
+    return {v_[c[0]], v_[c[1]], v_[c[2]]};
+  }
+  const std::shared_ptr<const std::vector<Vec3d>>& vertices() const { return vertices_; }
+  const std::shared_ptr<const std::vector<Corners>>& corners() const { return corners_; }
+
+ private:
+  std::shared_ptr<const std::vector<Vec3d>> vertices_;
+  std::shared_ptr<const std::vector<Corners>> corners_;
+  const Vec3d* v_ = nullptr;  // the tables' data, read without the shared pointers' indirection
+  const Corners* c_ = nullptr;
+  size_t count_ = 0;
+};
+
 struct BandVoxel {
   Coord voxel;
   uint32_t site = kNoSite;
@@ -64,7 +96,7 @@ struct BandVoxel {
 struct Seeds {
   SiteKind kind = SiteKind::kPoint;
   std::vector<Vec3d> points;                    ///< kPoint sites, unit space
-  std::vector<std::array<Vec3d, 3>> triangles;  ///< kTriangle sites, unit space
+  TriangleSites triangles;                      ///< kTriangle sites, unit space
   std::vector<BandVoxel> band;
   /// True when every band voxel's site is already its closest site (mesh and volume seeds): the engine then
   /// never offers anything to band voxels, which saves most of the work of thin bands.
