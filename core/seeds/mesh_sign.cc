@@ -342,8 +342,8 @@ void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
         if (firstUse(t, k)) around[next[corners[t][k]]++] = uint32_t(t);
     }
   }
-  // Each half-edge's other triangle; edges of one use by two triangles or of three or more uses are marked, then
-  // their normals computed (in triangle order, as edgeNormal does) in a serial pass: few meshes have any.
+  // Each half-edge's other triangle. An edge with three or more uses, or used twice by one (degenerate) triangle, is
+  // marked kManyUses and its normal computed in a serial pass below, in triangle order as before: few meshes have any.
   edge_mate.assign(3 * nt, kLoneEdge);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, nt, 1024), [&](const tbb::blocked_range<size_t>& r) {
     if (tbb::is_current_task_group_canceling()) return;
