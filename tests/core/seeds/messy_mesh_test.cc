@@ -483,5 +483,43 @@ TEST(MessyMeshTest, BeyondTheRimOfAnOpenBoxAWideBandIsSignedByTheWindingNumber) 
   expectContract("open box, band of 16 voxels", c, checkAgainstBruteForce(c));
 }
 
+// The pseudonormal of an edge with three or more uses (here: the top face of a cube listed twice) is kept apart from
+// the manifold edges' (computed from the one other triangle): beyond such an edge, outside both faces' planes' wedge,
+// the point is outside through every triangle that has the edge. The same points without the duplicate: the manifold
+// path. (The exact answer: outside the unit cube.)
+TEST(MessyMeshTest, EdgesOfThreeUsesKeepAPseudonormalThatSumsEveryFace) {
+  std::vector<Vec3d> vertices;
+  for (int i = 0; i < 8; ++i) vertices.push_back({double(i & 1), double((i >> 1) & 1), double((i >> 2) & 1)});
+  std::vector<std::array<uint32_t, 3>> triangles = {
+      {0, 2, 3}, {0, 3, 1}, {0, 1, 5}, {0, 5, 4}, {0, 4, 6}, {0, 6, 2},  // z = 0, y = 0, x = 0
+      {1, 3, 7}, {1, 7, 5}, {2, 6, 7}, {2, 7, 3}, {4, 5, 7}, {4, 7, 6},  // x = 1, y = 1, z = 1
+  };
+  for (int duplicated = 0; duplicated < 2; ++duplicated) {
+    if (duplicated) triangles.push_back(triangles[11]);
+    std::unique_ptr<MeshSign> sign;
+    ASSERT_TRUE(IsOk(MeshSign::build(std::make_shared<const std::vector<Vec3d>>(vertices),
+                                     std::make_shared<const std::vector<std::array<uint32_t, 3>>>(triangles),
+                                     SignMethod::kPseudonormal, nullptr, &sign)));
+    int checked = 0;
+    for (double along : {0.1, 0.5, 0.9})
+      for (double a : {0.05, 0.2, 0.6})
+        for (double b : {0.05, 0.2, 0.6}) {
+          // Beyond the edge y = 1, z = 1 (triangles 8, 11 and the copy) and beyond the edge x = 0, z = 1 (4, 11).
+          const Vec3d p1{along, 1 + a, 1 + b}, p2{-a, along, 1 + b};
+          for (uint32_t t : {8u, 11u, 12u}) {
+            if (t == 12u && !duplicated) continue;
+            EXPECT_FALSE(sign->inside(p1, t, std::hypot(a, b))) << "t " << t << " duplicated " << duplicated;
+            ++checked;
+          }
+          for (uint32_t t : {4u, 11u, 12u}) {
+            if (t == 12u && !duplicated) continue;
+            EXPECT_FALSE(sign->inside(p2, t, std::hypot(a, b))) << "t " << t << " duplicated " << duplicated;
+            ++checked;
+          }
+        }
+    EXPECT_EQ(checked, duplicated ? 162 : 108);
+  }
+}
+
 }  // namespace
 }  // namespace distband
