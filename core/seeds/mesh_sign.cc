@@ -342,25 +342,30 @@ void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
         if (firstUse(t, k)) around[next[corners[t][k]]++] = uint32_t(t);
     }
   }
+  // Calls visit(u) for each use of triangle t's edge e by a triangle u (t itself included), in triangle order.
+  auto forEachUse = [&](size_t t, int e, auto&& visit) {
+    const uint32_t a = std::min(corners[t][e], corners[t][(e + 1) % 3]);
+    const uint32_t b = std::max(corners[t][e], corners[t][(e + 1) % 3]);
+    for (uint32_t i = first[a]; i < first[a + 1]; ++i) {
+      const auto& c = corners[around[i]];
+      for (int f = 0; f < 3; ++f)
+        if (std::min(c[f], c[(f + 1) % 3]) == a && std::max(c[f], c[(f + 1) % 3]) == b) visit(around[i]);
+    }
+  };
   // Each half-edge's other triangle. An edge with three or more uses, or used twice by one (degenerate) triangle, is
-  // marked kManyUses and its normal computed in a serial pass below, in triangle order as before: few meshes have any.
+  // marked kManyUses and its normal summed in a serial pass below (in triangle order, as edgeNormal sums two): few
+  // meshes have any.
   edge_mate.assign(3 * nt, kLoneEdge);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, nt, 1024), [&](const tbb::blocked_range<size_t>& r) {
     if (tbb::is_current_task_group_canceling()) return;
     for (size_t t = r.begin(); t != r.end(); ++t)
       for (int e = 0; e < 3; ++e) {
-        const uint32_t a = std::min(corners[t][e], corners[t][(e + 1) % 3]);
-        const uint32_t b = std::max(corners[t][e], corners[t][(e + 1) % 3]);
         int uses = 0;
         uint32_t other = kLoneEdge;
-        for (uint32_t i = first[a]; i < first[a + 1]; ++i) {
-          const auto& c = corners[around[i]];
-          for (int f = 0; f < 3; ++f)
-            if (std::min(c[f], c[(f + 1) % 3]) == a && std::max(c[f], c[(f + 1) % 3]) == b) {
-              ++uses;
-              if (around[i] != t) other = around[i];
-            }
-        }
+        forEachUse(t, e, [&](uint32_t u) {
+          ++uses;
+          if (u != t) other = u;
+        });
         edge_mate[3 * t + e] = uses == 1 ? kLoneEdge : uses == 2 && other != kLoneEdge ? other : kManyUses;
       }
   });
@@ -369,15 +374,8 @@ void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
     if (stop(t)) return;
     for (int e = 0; e < 3; ++e) {
       if (edge_mate[3 * t + e] != kManyUses) continue;
-      const uint32_t a = std::min(corners[t][e], corners[t][(e + 1) % 3]);
-      const uint32_t b = std::max(corners[t][e], corners[t][(e + 1) % 3]);
       Vec3d sum{};
-      for (uint32_t i = first[a]; i < first[a + 1]; ++i) {
-        const auto& c = corners[around[i]];
-        for (int f = 0; f < 3; ++f)
-          if (std::min(c[f], c[(f + 1) % 3]) == a && std::max(c[f], c[(f + 1) % 3]) == b)
-            sum = sum + faceNormal(around[i]);
-      }
+      forEachUse(t, e, [&](uint32_t u) { sum = sum + faceNormal(u); });
       shared_edge_n.emplace_back(3 * uint64_t(t) + uint64_t(e), Normal3f(normalized(sum)));
     }
   }

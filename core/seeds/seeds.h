@@ -77,8 +77,6 @@ class TriangleSites {
     const Corners& c = c_[t];
     return {v_[c[0]], v_[c[1]], v_[c[2]]};
   }
-  const std::shared_ptr<const std::vector<Vec3d>>& vertices() const { return vertices_; }
-  const std::shared_ptr<const std::vector<Corners>>& corners() const { return corners_; }
 
  private:
   std::shared_ptr<const std::vector<Vec3d>> vertices_;
