@@ -101,11 +101,13 @@ class VdbTree {
 
   T background_;
   bool sealed_ = false;
+  static constexpr size_t kSlabAlign = size_t(2) << 20;
   struct SlabDelete {
-    void operator()(Leaf* p) const { ::operator delete(p, std::align_val_t(alignof(Leaf))); }
+    void operator()(Leaf* p) const { ::operator delete(p, std::align_val_t(kSlabAlign)); }
   };
   std::vector<std::unique_ptr<Leaf, SlabDelete>> slabs_;  // leaves, allocated in slabs of raw storage
   size_t slab_used_ = 0;
+  size_t slab_size_ = 0;  // leaves the newest slab holds
   std::vector<Leaf*> leaves_;
   std::unordered_map<Coord, Leaf*, CoordHash> index_;
   std::vector<Node1> nodes1_;

@@ -43,8 +43,10 @@ struct FrontEntry {
 
 // Allocator of the front lists. Lists of 16 MiB or more are mapped and unmapped directly: glibc would otherwise
 // serve them from its heaps once it has seen large blocks freed, and the holes they leave stay resident while the
-// bricks keep growing. Smaller ones stay on the heap, whose reused pages cost no page faults. resize() leaves new
-// entries uninitialised (DefaultInitConstruct): the lists are filled by parallel copies right after.
+// bricks keep growing. Lists of 2 MiB or more are 2 MiB-aligned and advised to use huge pages (a front of 6 MB took
+// ~1500 page faults of 4 KiB, ~13 µs each on some virtual machines). Smaller ones stay on the heap, whose reused
+// pages cost no page faults. resize() leaves new entries uninitialised (DefaultInitConstruct): the lists are filled
+// by parallel copies right after.
 template <class T>
 struct FrontAllocator : DefaultInitConstruct {
   using value_type = T;
@@ -54,15 +56,22 @@ struct FrontAllocator : DefaultInitConstruct {
   FrontAllocator(const FrontAllocator<U>&) {}
   T* allocate(size_t n) {
     const size_t bytes = n * sizeof(T);
-    if (bytes < kMapBytes) return std::allocator<T>().allocate(n);
-    void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (p == MAP_FAILED) throw std::bad_alloc();
+    if (bytes >= kMapBytes) return static_cast<T*>(mapHugeAligned(bytes));
+    if (bytes < kHugePageBytes) return std::allocator<T>().allocate(n);
+    const size_t rounded = (bytes + kHugePageBytes - 1) & ~(kHugePageBytes - 1);
+    void* p = std::aligned_alloc(kHugePageBytes, rounded);
+    if (!p) throw std::bad_alloc();
+    adviseHugePages(p, rounded);
     return static_cast<T*>(p);
   }
   void deallocate(T* p, size_t n) {
     const size_t bytes = n * sizeof(T);
-    if (bytes < kMapBytes) std::allocator<T>().deallocate(p, n);
-    else ::munmap(p, bytes);
+    if (bytes >= kMapBytes)
+      unmapHugeAligned(p, bytes);
+    else if (bytes < kHugePageBytes)
+      std::allocator<T>().deallocate(p, n);
+    else
+      std::free(p);
   }
   template <class U>
   bool operator==(const FrontAllocator<U>&) const { return true; }

@@ -8,6 +8,8 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "core/first_touch.h"
+
 namespace distband::band_internal {
 
 BrickState::BrickState(Coord o, bool with_lifespan) : origin(o) {
@@ -16,6 +18,71 @@ BrickState::BrickState(Coord o, bool with_lifespan) : origin(o) {
     expiry = std::make_unique<std::atomic<uint16_t>[]>(kBrickVoxels);
     for (int i = 0; i < kBrickVoxels; ++i) expiry[i].store(kNeverExpires, std::memory_order_relaxed);
   }
+}
+
+namespace {
+constexpr size_t kPooledBrickBytes =
+    (sizeof(BrickState) + alignof(BrickState) - 1) / alignof(BrickState) * alignof(BrickState);
+}  // namespace
+
+BrickPool::ChunkHeader* BrickPool::chunkOf(void* p) {
+  return reinterpret_cast<ChunkHeader*>(reinterpret_cast<uintptr_t>(p) & ~(kHugePageBytes - 1));
+}
+
+void* BrickPool::allocate() {
+  static_assert(kPooledBrickBytes >= sizeof(FreeBrick) && kHugePageBytes >= sizeof(ChunkHeader) + kPooledBrickBytes);
+  std::lock_guard<std::mutex> lock(mutex_);
+  void* p;
+  if (FreeBrick* f = free_) {
+    free_ = f->next;
+    p = f;
+  } else {
+    if (size_t(end_ - next_) < kPooledBrickBytes) {
+      auto* chunk = new (mapHugeAligned(kHugePageBytes)) ChunkHeader;
+      chunks_.push_back(chunk);
+      next_ = reinterpret_cast<char*>(chunk) + sizeof(ChunkHeader);
+      end_ = reinterpret_cast<char*>(chunk) + kHugePageBytes;
+    }
+    p = next_;
+    next_ += kPooledBrickBytes;
+  }
+  ++chunkOf(p)->live;
+  return p;
+}
+
+void BrickPool::deallocate(void* p) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ChunkHeader* c = chunkOf(p);
+  --c->live;
+  if (!draining_)
+    free_ = new (p) FreeBrick{free_};
+  else if (c->live == 0)
+    unmapLocked(c);
+}
+
+void BrickPool::unmapLocked(ChunkHeader* c) {
+  if (end_ && reinterpret_cast<char*>(c) == end_ - kHugePageBytes) next_ = end_ = nullptr;
+  const auto it = std::find(chunks_.begin(), chunks_.end(), c);
+  *it = chunks_.back();
+  chunks_.pop_back();
+  unmapHugeAligned(c, kHugePageBytes);
+}
+
+void BrickPool::drain() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  draining_ = true;
+  free_ = nullptr;  // freed storage is not reused any more (it may lie in chunks about to be unmapped)
+  for (size_t i = chunks_.size(); i-- > 0;)
+    if (chunks_[i]->live == 0) unmapLocked(chunks_[i]);
+}
+
+void BrickPool::reset() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (ChunkHeader* c : chunks_) unmapHugeAligned(c, kHugePageBytes);
+  std::vector<ChunkHeader*>().swap(chunks_);
+  free_ = nullptr;
+  next_ = end_ = nullptr;
+  draining_ = false;
 }
 
 namespace {
@@ -65,9 +132,10 @@ size_t BrickTable::releaseAll() {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
     size_t count = 0;
     for (size_t i = r.begin(); i != r.end(); ++i)
-      if (BrickState* b = slot(uint32_t(i)).exchange(nullptr, std::memory_order_relaxed)) delete b, ++count;
+      if (BrickState* b = slot(uint32_t(i)).exchange(nullptr, std::memory_order_relaxed)) b->~BrickState(), ++count;
     freed += count;
   });
+  pool_.reset();  // no brick is left: their storage goes at once
   return freed;
 }
 

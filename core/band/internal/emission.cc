@@ -92,6 +92,7 @@ bool emitSegment(BandState& s, const SegmentCallback& cb, int index, double lowe
   SegmentBricks whole = piece(true);
   whole.bricks.reserve(max_chunk ? 0 : count);
   std::vector<Brick> part;
+  if (last) s.table.drain();  // the bricks freed below give their memory back as their chunks empty
   size_t freed_bytes = 0;
   uint32_t base = 0;  // output bricks before c0
   for (size_t c0 = 0; c0 < n || (c0 == 0 && n == 0);) {
@@ -108,9 +109,10 @@ bool emitSegment(BandState& s, const SegmentCallback& cb, int index, double lowe
       tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 256), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i != r.end(); ++i) s.table.release(pending[i]);
       });
-      freed_bytes += (c1 - c0) * sizeof(BrickState);
+      // The bricks' own chunks are unmapped as they empty (BrickPool); paper mode's lifespans are on the heap.
+      if (s.lifespan.enabled) freed_bytes += (c1 - c0) * kBrickVoxels * sizeof(uint16_t);
       if (freed_bytes >= (size_t(64) << 20) && c1 < n) {
-        ::malloc_trim(0);  // the freed bricks' pages back before the next chunk's output (the last: below)
+        ::malloc_trim(0);  // their pages back before the next chunk's output (the last: below)
         freed_bytes = 0;
       }
     }

@@ -1,5 +1,6 @@
-// Tests for core/engine/brick_table: the sparse coordinate -> brick map (ids, lookups, concurrent creation,
-// neighbours across super-blocks, origin order) and that memory follows the touched bricks even on a 16384^3 grid.
+// Tests for core/band/internal/brick_table: the sparse coordinate -> brick map (ids, lookups, concurrent creation,
+// neighbours across super-blocks, origin order), that memory follows the touched bricks even on a 16384^3 grid, and
+// the brick pool (storage reused, given back once draining).
 #include "core/band/internal/brick_table.h"
 
 #include <unistd.h>
@@ -188,6 +189,55 @@ TEST(BrickTable, FarApartBricksOnA16384GridCostOnlyWhatTheyTouch) {
   EXPECT_LT(residentMb() - before, 8.0);
   EXPECT_EQ(table.releaseAll(), 4u);
   EXPECT_EQ(table.brickAt(corners[1]), nullptr);
+}
+
+TEST(BrickPool, FreedStorageIsReusedAndStaysDistinct) {
+  BrickPool pool;
+  std::set<void*> live;
+  std::vector<void*> order;
+  for (int i = 0; i < 1500; ++i) {  // a few chunks
+    void* p = pool.allocate();
+    ASSERT_TRUE(live.insert(p).second);
+    order.push_back(p);
+  }
+  pool.deallocate(order[700]);
+  live.erase(order[700]);
+  EXPECT_EQ(pool.allocate(), order[700]);  // the freed brick's storage comes back first
+}
+
+TEST(BrickPool, DrainingGivesEmptiedChunksBack) {
+  const double before = residentMb();
+  std::vector<void*> bricks;
+  {
+    BrickPool pool;
+    for (int i = 0; i < 4000; ++i) bricks.push_back(new (pool.allocate()) BrickState({0, 0, 0}, false));  // ~17 MiB
+    const double full = residentMb();
+    EXPECT_GT(full - before, 12.0);
+    pool.deallocate(bricks[0]);  // before draining: kept for reuse
+    pool.drain();
+    for (size_t i = 1; i < bricks.size(); ++i) {
+      static_cast<BrickState*>(bricks[i])->~BrickState();
+      pool.deallocate(bricks[i]);
+    }
+    // Every chunk emptied while draining is unmapped at once (the pool itself still exists).
+    EXPECT_LT(residentMb() - before, 4.0);
+  }
+}
+
+TEST(BrickTable, DrainedTableStillReleasesEveryBrick) {
+  BrickTable table({16, 16, 16}, true);
+  int64_t created = 0;
+  std::vector<uint32_t> ids;
+  for (int z = 0; z < 16; ++z)
+    for (int x = 0; x < 16; ++x) ids.push_back(table.idOf({x, z % 4, z}, true));
+  for (uint32_t id : ids) table.getOrCreate(id, &created);
+  EXPECT_EQ(created, 256);
+  table.drain();
+  for (size_t i = 0; i < ids.size(); i += 2) table.release(ids[i]);
+  EXPECT_EQ(table.get(ids[0]), nullptr);
+  EXPECT_NE(table.get(ids[1]), nullptr);
+  EXPECT_EQ(table.get(ids[1])->origin, table.originOf(ids[1]));
+  EXPECT_EQ(table.releaseAll(), 128u);
 }
 
 }  // namespace
