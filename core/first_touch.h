@@ -1,7 +1,8 @@
 // Fresh storage for a parallel fill: page first touches in parallel (touchPages), an allocator mixin and allocator
 // that leave new elements unset (DefaultInitConstruct, NoInitAllocator), bricks made without values
-// (appendUnsetBricks), the advice that large storage use transparent huge pages (adviseHugePages), and one thread's
-// arena of small runs in huge-page chunks (ChunkArena).
+// (appendUnsetBricks), the advice that large storage use transparent huge pages (adviseHugePages), storage mapped on
+// its own in huge pages (mapHugeAligned; MappedAllocator for scratch arrays) and one thread's arena of small runs in
+// such chunks (ChunkArena).
 // touchPages: the first write to each page of fresh storage, in parallel on the caller's TBB arena.
 // Why: a page's first touch is a page fault (~2-10 µs on virtual machines, ~13 µs on some), and a container's
 // zero-fill or construction loop takes them all on one thread; for storage of a megabyte or more that was a serial
@@ -119,9 +120,37 @@ struct NoInitAllocator : std::allocator<T>, DefaultInitConstruct {
   }
 };
 
+/// For scratch arrays filled in parallel right after they are sized (elements left unset: DefaultInitConstruct).
+/// Arrays of 2 MiB or more are mapped on their own (mapHugeAligned): huge pages, and their memory goes back to the
+/// system when they are freed, rather than staying in malloc's heaps where storage mapped later (bricks) cannot
+/// reuse it. Smaller ones come from the heap, whose reused pages cost no page faults.
+template <class T>
+struct MappedAllocator : DefaultInitConstruct {
+  using value_type = T;
+  MappedAllocator() = default;
+  template <class U>
+  MappedAllocator(const MappedAllocator<U>&) {}
+  T* allocate(size_t n) {
+    if (n > std::numeric_limits<size_t>::max() / sizeof(T)) throw std::bad_array_new_length();
+    if (n * sizeof(T) < kHugePageBytes) return std::allocator<T>().allocate(n);
+    return static_cast<T*>(mapHugeAligned(n * sizeof(T)));
+  }
+  void deallocate(T* p, size_t n) {
+    if (n * sizeof(T) < kHugePageBytes)
+      std::allocator<T>().deallocate(p, n);
+    else
+      unmapHugeAligned(p, n * sizeof(T));
+  }
+  template <class U>
+  bool operator==(const MappedAllocator<U>&) const {
+    return true;
+  }
+};
+
 /// One thread's storage for many small runs of trivially copyable `T` (each at most kChunkBytes): runs are carved
-/// from 2 MiB chunks advised to use huge pages, and stay valid until the arena goes. Per-result vectors cost a
-/// malloc each and fresh 4 KiB pages (a mesh's seed scan: ~5 k page faults of 11 k in a 512^3 run). Not thread-safe.
+/// from 2 MiB chunks mapped on their own (mapHugeAligned), and stay valid until the arena goes, which unmaps them.
+/// Per-result vectors cost a malloc each and fresh 4 KiB pages (a mesh's seed scan: ~5 k page faults of 11 k in a
+/// 512^3 run). Not thread-safe.
 template <class T>
 class ChunkArena {
  public:
@@ -129,7 +158,7 @@ class ChunkArena {
   static_assert(std::is_trivially_copyable_v<T> && sizeof(T) <= kChunkBytes);
   ChunkArena() = default;
   ~ChunkArena() {
-    for (void* c : chunks_) std::free(c);
+    for (void* c : chunks_) unmapHugeAligned(c, kChunkBytes);
   }
   ChunkArena(const ChunkArena&) = delete;
   ChunkArena& operator=(const ChunkArena&) = delete;
@@ -137,9 +166,7 @@ class ChunkArena {
   /// Uninitialised storage for `n` elements, n * sizeof(T) <= kChunkBytes.
   T* take(size_t n) {
     if (n > size_t(end_ - next_)) {
-      void* c = std::aligned_alloc(kChunkBytes, kChunkBytes);
-      if (!c) throw std::bad_alloc();
-      adviseHugePages(c, kChunkBytes);
+      void* c = mapHugeAligned(kChunkBytes);
       chunks_.push_back(c);
       next_ = static_cast<T*>(c);
       end_ = next_ + kChunkBytes / sizeof(T);

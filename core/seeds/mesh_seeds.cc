@@ -193,8 +193,9 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
   });
   for (size_t t = 0; t < nt; ++t) offsets[t + 1] += offsets[t];
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
-  // Every entry is written below: unset storage (NoInitAllocator), on huge pages when large.
-  std::vector<Candidate, NoInitAllocator<Candidate>> cand(offsets[nt]);
+  // Every entry is written below: unset storage, mapped on its own when large (given back when freed, not left in
+  // the heap beside the engine's bricks).
+  std::vector<Candidate, MappedAllocator<Candidate>> cand(offsets[nt]);
   tbb::parallel_for(size_t(0), nt, [&](size_t t) {
     Coord lo, hi;
     if (tbb::is_current_task_group_canceling() || !voxelBox(t, &lo, &hi)) return;

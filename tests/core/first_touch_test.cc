@@ -34,6 +34,17 @@ TEST(FirstTouch, AdviceOnAPartOfABufferLeavesItsContentsAlone) {
   for (size_t i = 0; i < buffer.size(); i += 4093) ASSERT_EQ(buffer[i], 7) << i;
 }
 
+TEST(FirstTouch, MappedAllocatorMapsLargeArraysAlignedAndKeepsSmallOnesOnTheHeap) {
+  std::vector<uint32_t, MappedAllocator<uint32_t>> large(size_t(3) << 20 >> 2);
+  std::vector<uint32_t, MappedAllocator<uint32_t>> small(100);
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(large.data()) % kHugePageBytes, 0u);
+  for (size_t i = 0; i < large.size(); ++i) large[i] = uint32_t(i);
+  large.resize(large.size() * 2);  // regrows through the allocator: the old entries move along
+  for (size_t i = 0; i < large.size() / 2; i += 4099) ASSERT_EQ(large[i], i);
+  small.assign(100, 9);
+  EXPECT_EQ(small[99], 9u);
+}
+
 TEST(FirstTouch, ChunkArenaRunsAreDisjointAndKeepTheirValues) {
   struct Item {
     uint32_t run, index;

@@ -41,41 +41,13 @@ struct FrontEntry {
   uint32_t site;
 };
 
-// Allocator of the front lists. Lists of 16 MiB or more are mapped and unmapped directly: glibc would otherwise
-// serve them from its heaps once it has seen large blocks freed, and the holes they leave stay resident while the
-// bricks keep growing. Lists of 2 MiB or more are 2 MiB-aligned and advised to use huge pages (a front of 6 MB took
-// ~1500 page faults of 4 KiB, ~13 µs each on some virtual machines). Smaller ones stay on the heap, whose reused
-// pages cost no page faults. resize() leaves new entries uninitialised (DefaultInitConstruct): the lists are filled
+// The front lists' allocator (core/first_touch.h): a list of 2 MiB or more is mapped on its own, in huge pages (a
+// front of 6 MB took ~1500 page faults of 4 KiB, ~13 µs each on some virtual machines), and unmapped when freed:
+// glibc would otherwise serve large lists from its heaps once it has seen large blocks freed, and the holes they
+// leave stay resident while the bricks keep growing. resize() leaves new entries uninitialised: the lists are filled
 // by parallel copies right after.
 template <class T>
-struct FrontAllocator : DefaultInitConstruct {
-  using value_type = T;
-  static constexpr size_t kMapBytes = size_t(16) << 20;
-  FrontAllocator() = default;
-  template <class U>
-  FrontAllocator(const FrontAllocator<U>&) {}
-  T* allocate(size_t n) {
-    const size_t bytes = n * sizeof(T);
-    if (bytes >= kMapBytes) return static_cast<T*>(mapHugeAligned(bytes));
-    if (bytes < kHugePageBytes) return std::allocator<T>().allocate(n);
-    const size_t rounded = (bytes + kHugePageBytes - 1) & ~(kHugePageBytes - 1);
-    void* p = std::aligned_alloc(kHugePageBytes, rounded);
-    if (!p) throw std::bad_alloc();
-    adviseHugePages(p, rounded);
-    return static_cast<T*>(p);
-  }
-  void deallocate(T* p, size_t n) {
-    const size_t bytes = n * sizeof(T);
-    if (bytes >= kMapBytes)
-      unmapHugeAligned(p, bytes);
-    else if (bytes < kHugePageBytes)
-      std::allocator<T>().deallocate(p, n);
-    else
-      std::free(p);
-  }
-  template <class U>
-  bool operator==(const FrontAllocator<U>&) const { return true; }
-};
+using FrontAllocator = MappedAllocator<T>;
 using FrontList = std::vector<FrontEntry, FrontAllocator<FrontEntry>>;
 
 struct ThreadBuffers {
