@@ -9,6 +9,8 @@
 #include <optional>
 #include <stdexcept>
 
+#include <malloc.h>
+
 #include <fmt/format.h>
 
 #include "core/band/internal/band_run.h"
@@ -49,11 +51,22 @@ Status validateBandOptions(const Grid& grid, const BandOptions& o) {
 
 namespace {
 
+// The engine's bricks and large lists are mapped on their own (BrickPool, MappedAllocator), so memory left free in
+// malloc's heaps cannot hold them, as it held the bricks when they came from malloc: when the inputs' making left a
+// sizeable amount there, it is handed back first rather than staying resident beside them (a 3.33 M-triangle mesh at
+// 1024^3: ~100 MB free in the heap when the engine starts; peak RSS 588 MB without this, 551 MB before the pool).
+constexpr size_t kGiveBackFreeHeap = size_t(64) << 20;
+
+void giveBackFreeHeap() {
+  if (::mallinfo2().fordblks >= kGiveBackFreeHeap) ::malloc_trim(0);
+}
+
 FieldRunResult runEngine(const Grid& grid, const Seeds& seeds, const BandOptions& options,
                        const SegmentCallback& on_segment, std::vector<BandVoxel>* owned_band) {
   if (Status s = validateBandOptions(grid, options); !s.ok()) throw std::invalid_argument(s.message());
   if (seeds.region && seeds.region->size() != size_t(grid.voxelCount()))
     throw std::invalid_argument("seeds.region must hold one label per grid voxel");
+  giveBackFreeHeap();
   FieldRunResult result;
   auto body = [&] {
     std::optional<band_internal::BandRun> run;

@@ -9,13 +9,11 @@
 #include <memory>
 #include <type_traits>
 
-#include <malloc.h>
-
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/task_group.h>
 
 #include "core/first_touch.h"
@@ -297,7 +295,6 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
     scaled ? scanBrick(b, std::true_type{}) : scanBrick(b, std::false_type{});
   });
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);
-  const size_t scratch_bytes = cand.size() * sizeof(Candidate);
   decltype(cand)().swap(cand);
   std::vector<size_t> band_at(nbricks + 1, 0);
   for (size_t b = 0; b < nbricks; ++b) band_at[b + 1] = band_at[b] + per_brick[b].count;
@@ -369,9 +366,6 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
     };
   }
   if (seeds.kind == SiteKind::kTriangle) seeds.triangles = tris;
-  // The scan's temporaries (as large as the band) were freed in the worker threads' malloc arenas, which keep
-  // the pages; when that is a sizeable amount, hand them back so the engine's bricks do not come on top of them.
-  if (scratch_bytes + seeds.band.size() * sizeof(BandVoxel) >= (size_t(64) << 20)) ::malloc_trim(0);
 
   if (stats) {
     stats->band_voxels = static_cast<int64_t>(seeds.band.size());
