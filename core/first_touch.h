@@ -33,13 +33,17 @@ namespace distband {
 
 inline constexpr size_t kHugePageBytes = size_t(2) << 20;
 
+/// `n` (a size, or an address) rounded down / up to a multiple of kHugePageBytes.
+constexpr size_t roundDownToHugePage(size_t n) { return n & ~(kHugePageBytes - 1); }
+constexpr size_t roundUpToHugePage(size_t n) { return roundDownToHugePage(n + kHugePageBytes - 1); }
+
 /// Advises the kernel to back the whole 2 MiB pages inside [p, p + bytes) with transparent huge pages (advice only:
 /// where the system has them off, or the range holds no whole one, nothing changes). Memory the caller owns, from
 /// malloc or mmap; the pages around the range are left as they are.
 inline void adviseHugePages(void* p, size_t bytes) {
 #ifdef MADV_HUGEPAGE
-  const uintptr_t begin = (reinterpret_cast<uintptr_t>(p) + kHugePageBytes - 1) & ~(kHugePageBytes - 1);
-  const uintptr_t end = (reinterpret_cast<uintptr_t>(p) + bytes) & ~(kHugePageBytes - 1);
+  const uintptr_t begin = roundUpToHugePage(reinterpret_cast<uintptr_t>(p));
+  const uintptr_t end = roundDownToHugePage(reinterpret_cast<uintptr_t>(p) + bytes);
   if (begin < end) ::madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
 #else
   (void)p, (void)bytes;
@@ -49,19 +53,19 @@ inline void adviseHugePages(void* p, size_t bytes) {
 /// Anonymous memory of `bytes` (rounded up to whole 2 MiB pages), 2 MiB-aligned and advised to use huge pages, mapped
 /// on its own (given back to the system by unmapHugeAligned, whatever the heap keeps). Throws std::bad_alloc.
 inline void* mapHugeAligned(size_t bytes) {
-  const size_t rounded = (bytes + kHugePageBytes - 1) & ~(kHugePageBytes - 1);
+  const size_t rounded = roundUpToHugePage(bytes);
   void* raw = ::mmap(nullptr, rounded + kHugePageBytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
   if (raw == MAP_FAILED) throw std::bad_alloc();
-  const uintptr_t begin = (reinterpret_cast<uintptr_t>(raw) + kHugePageBytes - 1) & ~(kHugePageBytes - 1);
+  // Keep the aligned `rounded` bytes inside the mapping; give back the head before them and the tail after (never
+  // empty: the head is less than a huge page).
+  const uintptr_t begin = roundUpToHugePage(reinterpret_cast<uintptr_t>(raw));
   const size_t head = begin - reinterpret_cast<uintptr_t>(raw);
   if (head) ::munmap(raw, head);
-  if (kHugePageBytes - head) ::munmap(reinterpret_cast<void*>(begin + rounded), kHugePageBytes - head);
+  ::munmap(reinterpret_cast<void*>(begin + rounded), kHugePageBytes - head);
   adviseHugePages(reinterpret_cast<void*>(begin), rounded);
   return reinterpret_cast<void*>(begin);
 }
-inline void unmapHugeAligned(void* p, size_t bytes) {
-  ::munmap(p, (bytes + kHugePageBytes - 1) & ~(kHugePageBytes - 1));
-}
+inline void unmapHugeAligned(void* p, size_t bytes) { ::munmap(p, roundUpToHugePage(bytes)); }
 
 inline void touchPages(void* p, size_t bytes) {
   constexpr size_t kPage = 4096;
@@ -93,7 +97,6 @@ struct DefaultInitConstruct {
 /// the largest costs of a whole-grid field after the passes themselves.
 template <class T>
 struct NoInitAllocator : std::allocator<T>, DefaultInitConstruct {
-  static constexpr size_t kHugePage = kHugePageBytes;
   static constexpr size_t kHugeFrom = size_t(8) << 20;
   template <class U>
   struct rebind {
@@ -106,8 +109,8 @@ struct NoInitAllocator : std::allocator<T>, DefaultInitConstruct {
     if (n > std::numeric_limits<size_t>::max() / sizeof(T)) throw std::bad_array_new_length();
     const size_t bytes = n * sizeof(T);
     if (bytes < kHugeFrom) return std::allocator<T>::allocate(n);
-    const size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
-    void* p = std::aligned_alloc(kHugePage, rounded);
+    const size_t rounded = roundUpToHugePage(bytes);
+    void* p = std::aligned_alloc(kHugePageBytes, rounded);
     if (!p) throw std::bad_alloc();
     adviseHugePages(p, rounded);  // advice only: without it, 4 KiB pages
     return static_cast<T*>(p);

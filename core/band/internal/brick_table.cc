@@ -26,7 +26,7 @@ constexpr size_t kPooledBrickBytes =
 }  // namespace
 
 BrickPool::ChunkHeader* BrickPool::chunkOf(void* p) {
-  return reinterpret_cast<ChunkHeader*>(reinterpret_cast<uintptr_t>(p) & ~(kHugePageBytes - 1));
+  return reinterpret_cast<ChunkHeader*>(roundDownToHugePage(reinterpret_cast<uintptr_t>(p)));
 }
 
 void* BrickPool::allocate() {
