@@ -7,9 +7,14 @@
 namespace distband {
 namespace {
 constexpr uint32_t kLeafSize = 8;
-// The largest third-order term (times 4 pi) a cluster's expansion may leave out: query(), coarseQuery().
+// The largest third-order term (times 4 pi) a cluster's expansion may leave out: query(), coarseQuery(),
+// roughQuery().
 constexpr double kThirdOrderTolerance = 1e-2;
 constexpr double kCoarseThirdOrderTolerance = 1e-1;
+constexpr double kRoughThirdOrderTolerance = 1.0;
+// How far, in its radii, a cluster must be for roughQuery() to take its expansion (query() and coarseQuery(): the
+// constructor's beta).
+constexpr double kRoughBeta = 1.25;
 
 Vec3d centroid(const std::array<Vec3d, 3>& t) { return (t[0] + t[1] + t[2]) * (1.0 / 3.0); }
 
@@ -133,16 +138,22 @@ double WindingNumber::exact(const Vec3d& p) const {
   return sum / (4.0 * std::numbers::pi);
 }
 
-double WindingNumber::query(const Vec3d& p) const { return sum(p, UINT32_MAX, kThirdOrderTolerance); }
+double WindingNumber::query(const Vec3d& p) const { return sum(p, UINT32_MAX, kThirdOrderTolerance, beta2_); }
 
-double WindingNumber::coarseQuery(const Vec3d& p) const { return sum(p, UINT32_MAX, kCoarseThirdOrderTolerance); }
+double WindingNumber::coarseQuery(const Vec3d& p) const {
+  return sum(p, UINT32_MAX, kCoarseThirdOrderTolerance, beta2_);
+}
+
+double WindingNumber::roughQuery(const Vec3d& p) const {
+  return sum(p, UINT32_MAX, kRoughThirdOrderTolerance, kRoughBeta * kRoughBeta);
+}
 
 double WindingNumber::principalValue(uint32_t t) const {
   const uint32_t at = position_[t];
-  return sum(centroid(tris_[at]), at, kThirdOrderTolerance);
+  return sum(centroid(tris_[at]), at, kThirdOrderTolerance, beta2_);
 }
 
-double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance) const {
+double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance, double beta2) const {
   if (nodes_.empty()) return 0;
   double far = 0;
   AngleSum near;  // the exactly summed triangles' half solid angles
@@ -155,7 +166,7 @@ double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance) const
     const double d2 = d.lengthSqr();
     // Far enough for the expansion: beyond beta radii, and its next (third-order) term, of size
     // area * radius^2 / distance^4, small enough.
-    if (d2 > beta2_ * n.radius2 && n.abs_area * n.radius2 < tolerance * d2 * d2) {
+    if (d2 > beta2 * n.radius2 && n.abs_area * n.radius2 < tolerance * d2 * d2) {
       // Far field of the cluster's area elements a at x: a . (x - p) / |x - p|^3 expanded at the center: the dipole,
       // then the second-order term trace(J M^T) with J = I / r^3 - 3 r r^T / r^5 (r = center - p).
       const double inv_r = 1.0 / std::sqrt(d2), inv_r3 = inv_r * inv_r * inv_r;

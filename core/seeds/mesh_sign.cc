@@ -190,12 +190,16 @@ constexpr std::array<BrickMask, (kBrickSize / kEdge) * (kBrickSize / kEdge) * (k
 }
 constexpr auto kOctants = makeBoxes<4>();  // 4^3
 constexpr auto kCells = makeBoxes<2>();    // 2^3
-// The winding hierarchy's error bound (kThirdOrderTolerance per cluster, core/mesh/winding_number.cc; measured below
-// 0.011 near open meshes) with room to spare.
-constexpr double kWindingQueryError = 0.03;
-// WindingNumber::coarseQuery's (measured below 0.042), with room to spare: where the coarse value is farther than this
-// from 1/2, it decides the side; otherwise the full query does.
-constexpr double kCoarseQueryError = 0.1;
+// The winding hierarchy's queries, cheapest first, each with its error bound: what
+// tests/core/mesh/winding_number_test.cc measures near open meshes (query() below 0.011, coarseQuery() below 0.042,
+// roughQuery() below 0.17), with room to spare. A sign takes the first whose value decides its question.
+struct WindingTier {
+  double (WindingNumber::*query)(const Vec3d&) const;
+  double error;
+};
+constexpr WindingTier kWindingTiers[] = {
+    {&WindingNumber::roughQuery, 0.3}, {&WindingNumber::coarseQuery, 0.1}, {&WindingNumber::query, 0.03}};
+constexpr double kWindingQueryError = kWindingTiers[std::size(kWindingTiers) - 1].error;  // the finest
 
 }  // namespace
 
@@ -278,17 +282,36 @@ struct MeshSign::Tables {
   void buildPseudonormals(const Interrupter* interrupter);
   void buildBoundaryPieces();
   std::once_flag boundary_once;
-  /// A lower bound on the distance (frame units) from every point within `radius` of p to the boundary curves;
-  /// kFarFromBoundary when the mesh has none.
-  double boundaryDistance(const Vec3d& p, double radius) const;
-  /// The winding number at p, as cheaply as its side of 1/2 allows: the coarse query, or the full one where the coarse
-  /// value lies within its error of 1/2; `error` gets the error bound of the value returned.
+  /// The boundary pieces that can be nearest to a point within `reach` of `center` (found once for a brick, its boxes
+  /// and voxels then bound their distance from a few pieces): every piece not listed is at least `cap` from center.
+  struct NearBoundary {
+    Vec3d center;
+    double reach = 0, cap = 0;
+    std::vector<uint32_t> pieces;
+  };
+  void findNearBoundary(const Vec3d& center, double reach, NearBoundary* near) const;
+  /// A lower bound on the distance (frame units) from every point within `radius` of p to the boundary curves, p
+  /// within near.reach of near.center; kFarFromBoundary when the mesh has none.
+  double boundaryDistance(const NearBoundary& near, const Vec3d& p, double radius) const;
+  /// The winding number at p, as cheaply as its side of 1/2 allows (windingUntil); `error` gets the error bound of the
+  /// value returned.
   double windingAt(const Vec3d& p, double* error) const;
+  /// The winding number at p by the cheapest tier whose value and error bound satisfy `decides(value, error)`, else
+  /// by the finest; `error` gets the error bound of the value returned.
+  template <class Decides>
+  double windingUntil(const Vec3d& p, const Decides& decides, double* error) const {
+    double w = 0;
+    for (const WindingTier& tier : kWindingTiers) {
+      w = ((*winding).*tier.query)(p), *error = tier.error;
+      if (decides(w, *error)) break;
+    }
+    return w;
+  }
   /// Signs the voxels of `subset` (delivered voxels of the brick, all within `radius` frame units of `center`) with
   /// one winding query when that provably agrees with the exact winding number (below); false, nothing signed, else.
   bool signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
-                            const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
-                            const Vec3d& scale) const;
+                            const NearBoundary& near, const uint32_t* sites, const uint32_t* site_triangle,
+                            double voxel_size, const Vec3d& scale) const;
 };
 
 void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
@@ -427,25 +450,43 @@ void MeshSign::Tables::buildBoundaryPieces() {
     boundary_cells[boundaryCellOf((boundary_pieces[k].a + boundary_pieces[k].b) * 0.5)].push_back(uint32_t(k));
 }
 
-double MeshSign::Tables::boundaryDistance(const Vec3d& p, double radius) const {
-  if (boundary_pieces.empty()) return kFarFromBoundary;
+void MeshSign::Tables::findNearBoundary(const Vec3d& center, double reach, NearBoundary* near) const {
+  near->center = center, near->reach = reach;
+  near->cap = std::numeric_limits<double>::infinity();
+  near->pieces.clear();
+  if (boundary_pieces.empty()) return;
   double best2 = std::numeric_limits<double>::infinity();
-  double cap = std::numeric_limits<double>::infinity();
+  auto consider = [&](uint32_t k) {
+    best2 = std::min(best2, segmentDistance2(center, boundary_pieces[k].a, boundary_pieces[k].b));
+    near->pieces.push_back(k);
+  };
   if (boundary_cells.empty()) {
-    for (const BoundaryPiece& piece : boundary_pieces) best2 = std::min(best2, segmentDistance2(p, piece.a, piece.b));
+    for (uint32_t k = 0; k < boundary_pieces.size(); ++k) consider(k);
   } else {
-    const Coord home = boundaryCellOf(p);
+    const Coord home = boundaryCellOf(center);
     for (int z = -kBoundaryRings; z <= kBoundaryRings; ++z)
       for (int y = -kBoundaryRings; y <= kBoundaryRings; ++y)
         for (int x = -kBoundaryRings; x <= kBoundaryRings; ++x) {
           const auto it = boundary_cells.find(Coord{home.x + x, home.y + y, home.z + z});
           if (it == boundary_cells.end()) continue;
-          for (uint32_t k : it->second)
-            best2 = std::min(best2, segmentDistance2(p, boundary_pieces[k].a, boundary_pieces[k].b));
+          for (uint32_t k : it->second) consider(k);
         }
     // A piece not searched has its midpoint kBoundaryRings cells away or more, and lies within half a piece of it.
-    cap = kBoundaryRings * kBoundaryCell - kBoundaryPiece / 2;
+    near->cap = kBoundaryRings * kBoundaryCell - kBoundaryPiece / 2;
   }
+  // A piece farther from the center than the nearest by more than 2 reach is nobody's nearest within reach.
+  const double keep = std::sqrt(best2) + 2 * reach;
+  std::erase_if(near->pieces, [&](uint32_t k) {
+    return segmentDistance2(center, boundary_pieces[k].a, boundary_pieces[k].b) > keep * keep;
+  });
+}
+
+double MeshSign::Tables::boundaryDistance(const NearBoundary& near, const Vec3d& p, double radius) const {
+  if (boundary_pieces.empty()) return kFarFromBoundary;
+  double best2 = std::numeric_limits<double>::infinity();
+  for (uint32_t k : near.pieces)
+    best2 = std::min(best2, segmentDistance2(p, boundary_pieces[k].a, boundary_pieces[k].b));
+  const double cap = near.cap - (p - near.center).length();
   return std::max(0.0, std::min(std::sqrt(best2), cap) - radius);
 }
 
@@ -461,7 +502,8 @@ double MeshSign::Tables::boundaryDistance(const Vec3d& p, double radius) const {
 // also send the brick to the per-voxel queries. Not covered: one connected part that crosses itself, or stacks two
 // sheets of the same orientation, within a brick.
 bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
-                                            const uint32_t* sites, const uint32_t* site_triangle, double voxel_size,
+                                            const NearBoundary& near, const uint32_t* sites,
+                                            const uint32_t* site_triangle, double voxel_size,
                                             const Vec3d& scale) const {
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
   const auto at = [&](int i) {
@@ -489,7 +531,7 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   // Every point of the subset's box is at least this far from the boundary curves. Farther than every voxel's
   // distance to the surface, no voxel's closest point lies on a boundary edge, where "behind the pseudonormal" need not
   // mean across the sheet (beyond a rim, behind the face's plane, the winding number has not jumped).
-  const double boundary = boundaryDistance(center, radius);
+  const double boundary = boundaryDistance(near, center, radius);
   if (boundary <= farthest) return false;
   double spread2 = 0;  // the farthest voxel from the reference
   for (int w = 0; w < kBrickVoxels / 64; ++w)
@@ -500,11 +542,12 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   const double drift = std::sqrt(spread2) / (std::numbers::pi * boundary);
   if (drift + kWindingQueryError >= 0.5) return false;
   const bool ref_behind = insidePseudonormal(at(ref), triangleOf(sites[ref]), std::abs(brick.values[ref]) / voxel_size);
-  // The front side's value: coarse first, the full query when the coarse one's error leaves the question open.
+  // The reference's value must lie within 1/2 of the side the pseudonormal gives it, less the drift: a check of the
+  // pseudonormal there as much as of w0.
   const double behind = ref_behind ? 1.0 : 0.0;
-  if (std::abs(winding->coarseQuery(at(ref)) - behind) + drift + kCoarseQueryError >= 0.5 &&
-      std::abs(winding->query(at(ref)) - behind) + drift + kWindingQueryError >= 0.5)
-    return false;
+  const auto agrees = [&](double w, double w_error) { return std::abs(w - behind) + drift + w_error < 0.5; };
+  double error = 0;
+  if (!agrees(windingUntil(at(ref), agrees, &error), error)) return false;
   for (int w = 0; w < kBrickVoxels / 64; ++w)
     for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
       const int i = w * 64 + std::countr_zero(bits);
@@ -516,10 +559,8 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
 }
 
 double MeshSign::Tables::windingAt(const Vec3d& p, double* error) const {
-  const double coarse = winding->coarseQuery(p);
-  if (std::abs(coarse - 0.5) > kCoarseQueryError) return *error = kCoarseQueryError, coarse;
-  *error = kWindingQueryError;
-  return winding->query(p);
+  const auto far_from_half = [](double w, double w_error) { return std::abs(w - 0.5) > w_error; };
+  return windingUntil(p, far_from_half, error);
 }
 
 MeshSign::MeshSign(SignMethod method) : method_(method), tables_(std::make_unique<Tables>()) {}
@@ -648,6 +689,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   int64_t certified = 0;        // signed by a certificate
   // Winding: every voxel of the brick (and the path between two of them) is at least this far from the boundary.
   double brick_boundary = 0;
+  Tables::NearBoundary near;  // winding: the boundary pieces near the brick
   if (method_ == SignMethod::kWinding) {
     // Isolated: a thread that waits for the build inside it must not pick up another brick's task meanwhile.
     std::call_once(tables_->boundary_once,
@@ -657,7 +699,9 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     };
     const Vec3d brick_center = boxCenter(brick.origin, 3.5);
     const double brick_radius = 3.5 * std::sqrt(scale.lengthSqr());
-    if (s.signWindingCertified(brick, brick.mask, brick_center, brick_radius, sites, site_triangle, voxel_size, scale))
+    s.findNearBoundary(brick_center, brick_radius, &near);
+    if (s.signWindingCertified(brick, brick.mask, brick_center, brick_radius, near, sites, site_triangle, voxel_size,
+                               scale))
       return {0, brick.mask.count(), 0, 0};
     // Refused whole (near a hole, a sharp edge, where parts meet): each 4^3 octant on its own, with half the spread
     // and, nearer the boundary, half the box, then each 2^3 cell of what is left, before any voxel takes a query of
@@ -672,7 +716,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
         const int i = int(k);
         const Coord lo{edge * (i % per_axis), edge * (i / per_axis % per_axis), edge * (i / (per_axis * per_axis))};
         if (!s.signWindingCertified(brick, box, boxCenter(brick.origin + lo, half), half * std::sqrt(scale.lengthSqr()),
-                                    sites, site_triangle, voxel_size, scale))
+                                    near, sites, site_triangle, voxel_size, scale))
           continue;
         certified += box.count();
         for (int w = 0; w < kBrickVoxels / 64; ++w) todo.words[w] &= ~box.words[w];
@@ -680,7 +724,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     };
     certifyBoxes(kOctants, 4);
     certifyBoxes(kCells, 2);
-    if (!todo.empty()) brick_boundary = s.boundaryDistance(brick_center, brick_radius);
+    if (!todo.empty()) brick_boundary = s.boundaryDistance(near, brick_center, brick_radius);
   }
   // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
   // surface. A voxel's distance to the surface is a ball around it that no surface crosses: parity is constant there,
@@ -714,7 +758,9 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
         double error;
         const double w = s.windingAt(p, &error);
         in = w > 0.5;
-        const double boundary = sites[i] == kNoSite ? 0 : brick_boundary;
+        // The path from the ball's centre to a voxel it signs lies in the brick and in the ball.
+        const double boundary =
+            sites[i] == kNoSite ? 0 : std::max(brick_boundary, r > 0 ? s.boundaryDistance(near, p, r) : 0.0);
         if (r > 0 && boundary > 0)
           balls.push_back({p, r * r, in, std::abs(w - 0.5) - error, 1.0 / (std::numbers::pi * boundary)});
       } else {
