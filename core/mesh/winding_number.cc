@@ -4,9 +4,14 @@
 #include <cmath>
 #include <numbers>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+
 namespace distband {
 namespace {
 constexpr uint32_t kLeafSize = 8;
+constexpr uint32_t kParallelBuild = 16384;  // nodes of this many triangles build their halves side by side
 // The largest third-order term (times 4 pi) a cluster's expansion may leave out: query(), coarseQuery(),
 // roughQuery().
 constexpr double kThirdOrderTolerance = 1e-2;
@@ -66,8 +71,14 @@ WindingNumber::WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double
     : tris_(std::move(triangles)), beta2_(beta * beta), interrupter_(interrupter) {
   ids_.resize(tris_.size());
   for (uint32_t i = 0; i < ids_.size(); ++i) ids_[i] = i;
-  nodes_.reserve(2 * tris_.size() / kLeafSize + 2);
-  if (!tris_.empty()) build(0, static_cast<uint32_t>(tris_.size()));
+  // Each triangle's centroid once (the split's sort key and every level's bounds read it).
+  centroids_.resize(tris_.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, tris_.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) centroids_[i] = centroid(tris_[i]);
+  });
+  nodes_.resize(tris_.empty() ? 0 : nodeCount(uint32_t(tris_.size())));
+  if (!tris_.empty()) build(0, static_cast<uint32_t>(tris_.size()), 0);
+  std::vector<Vec3d>().swap(centroids_);
   // The build ordered ids_; put the triangles in the same order (leaves then hold contiguous ranges).
   std::vector<std::array<Vec3d, 3>> ordered(tris_.size());
   position_.resize(tris_.size());
@@ -79,25 +90,27 @@ WindingNumber::WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double
   interrupter_ = nullptr;
 }
 
-uint32_t WindingNumber::build(uint32_t begin, uint32_t end) {
-  const uint32_t id = static_cast<uint32_t>(nodes_.size());
-  nodes_.push_back({});
+uint32_t WindingNumber::nodeCount(uint32_t triangles) {
+  return triangles <= kLeafSize ? 1 : 1 + nodeCount(triangles / 2) + nodeCount(triangles - triangles / 2);
+}
+
+void WindingNumber::build(uint32_t begin, uint32_t end, uint32_t id) {
   // Nodes of thousands of triangles take milliseconds each level: poll there (a stopped build is discarded).
-  if (end - begin >= 4096 && isInterrupted(interrupter_)) return id;
+  if (end - begin >= 4096 && isInterrupted(interrupter_)) return;
   Node n{};
   n.begin = begin, n.end = end;
   double total = 0;
   const auto tri = [&](uint32_t i) -> const std::array<Vec3d, 3>& { return tris_[ids_[i]]; };
-  Vec3d weighted{}, lo = centroid(tri(begin)), hi = lo;
+  Vec3d weighted{}, lo = centroids_[ids_[begin]], hi = lo;
   for (uint32_t i = begin; i < end; ++i) {
     const auto& t = tri(i);
     const Vec3d av = (t[1] - t[0]).cross(t[2] - t[0]) * 0.5;
     const double a = av.length();
+    const Vec3d c = centroids_[ids_[i]];
     n.area = n.area + av;
     n.abs_area += a;
-    weighted = weighted + centroid(t) * a;
+    weighted = weighted + c * a;
     total += a;
-    const Vec3d c = centroid(t);
     lo = {std::min(lo.x, c.x), std::min(lo.y, c.y), std::min(lo.z, c.z)};
     hi = {std::max(hi.x, c.x), std::max(hi.y, c.y), std::max(hi.z, c.z)};
   }
@@ -105,7 +118,7 @@ uint32_t WindingNumber::build(uint32_t begin, uint32_t end) {
   for (uint32_t i = begin; i < end; ++i) {
     const auto& t = tri(i);
     for (const Vec3d& v : t) n.radius2 = std::max(n.radius2, (v - n.center).lengthSqr());
-    const Vec3d av = (t[1] - t[0]).cross(t[2] - t[0]) * 0.5, d = centroid(t) - n.center;
+    const Vec3d av = (t[1] - t[0]).cross(t[2] - t[0]) * 0.5, d = centroids_[ids_[i]] - n.center;
     const double a[3] = {av.x, av.y, av.z}, e[3] = {d.x, d.y, d.z};
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c) n.moment[3 * r + c] += a[r] * e[c];
@@ -115,16 +128,22 @@ uint32_t WindingNumber::build(uint32_t begin, uint32_t end) {
     const int axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
     const uint32_t mid = begin + (end - begin) / 2;
     auto key = [&](uint32_t i) {
-      const Vec3d c = centroid(tris_[i]);
+      const Vec3d& c = centroids_[i];
       return axis == 0 ? c.x : (axis == 1 ? c.y : c.z);
     };
     std::nth_element(ids_.begin() + begin, ids_.begin() + mid, ids_.begin() + end,
                      [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
-    n.left = build(begin, mid);
-    n.right = build(mid, end);
+    // Depth first, left before right: the same node numbers whichever thread builds which half.
+    n.left = id + 1;
+    n.right = id + 1 + nodeCount(mid - begin);
+    const auto left = [&] { build(begin, mid, n.left); };
+    const auto right = [&] { build(mid, end, n.right); };
+    if (end - begin >= kParallelBuild)
+      tbb::parallel_invoke(left, right);
+    else
+      left(), right();
   }
   nodes_[id] = n;
-  return id;
 }
 
 double WindingNumber::solidAngle(const std::array<Vec3d, 3>& t, const Vec3d& p) const {

@@ -53,7 +53,10 @@ class WindingNumber {
     uint32_t begin, end;    ///< triangle range (leaves)
     uint32_t left, right;   ///< children, 0 for a leaf
   };
-  uint32_t build(uint32_t begin, uint32_t end);
+  /// Builds node `id` over triangles [begin, end) of ids_ and, after it, its subtree, numbered depth first.
+  void build(uint32_t begin, uint32_t end, uint32_t id);
+  /// The nodes of the subtree over this many triangles.
+  static uint32_t nodeCount(uint32_t triangles);
   double sum(const Vec3d& p, uint32_t skip, double tolerance, double beta2) const;
   double solidAngle(const std::array<Vec3d, 3>& t, const Vec3d& p) const;
 
@@ -61,6 +64,7 @@ class WindingNumber {
   std::vector<uint32_t> ids_;               ///< ids_[i]: the constructor's index of tris_[i]
   std::vector<uint32_t> position_;          ///< position_[id]: where triangle id sits in tris_
   std::vector<Node> nodes_;
+  std::vector<Vec3d> centroids_;  ///< during the build only: by the constructor's index
   double beta2_;
   const Interrupter* interrupter_ = nullptr;  ///< during the build only
 };

@@ -797,9 +797,9 @@ uint64_t MeshSign::estimateBytes(SignMethod method, uint64_t vertices, uint64_t 
              triangles * (sizeof(std::array<uint32_t, 3>) + sizeof(Normal3f) + 3 * sizeof(uint32_t) + sizeof(Vec3d) +
                           3 * sizeof(double));
     case SignMethod::kWinding:
-      // The triangles, twice while the tree is built, about two nodes per leaf of a few triangles, and each
-      // triangle's part.
-      return triangles * (2 * sizeof(std::array<Vec3d, 3>) + 64 + sizeof(uint32_t));
+      // The triangles, twice while the tree is built, with their centroids then, about two nodes per leaf of a few
+      // triangles, and each triangle's part.
+      return triangles * (2 * sizeof(std::array<Vec3d, 3>) + sizeof(Vec3d) + 64 + sizeof(uint32_t));
     case SignMethod::kParity:
       // Embree's float vertices, indices and BVH (a generous 3x the buffers), and the triangles it is built from.
       return triangles * (sizeof(std::array<Vec3d, 3>) + 4 * (36 + 12));
