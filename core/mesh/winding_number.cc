@@ -91,7 +91,20 @@ WindingNumber::WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double
 }
 
 uint32_t WindingNumber::nodeCount(uint32_t triangles) {
-  return triangles <= kLeafSize ? 1 : 1 + nodeCount(triangles / 2) + nodeCount(triangles - triangles / 2);
+  // A node over m > kLeafSize triangles has halves of floor(m / 2) and ceil(m / 2): so the counts of m and m + 1
+  // follow from those of h = floor(m / 2) and h + 1, in O(log m) steps.
+  struct Pair {
+    uint32_t of_m, of_next;
+  };
+  const auto counts = [](const auto& self, uint32_t m) -> Pair {
+    if (m + 1 <= kLeafSize) return {1, 1};
+    const uint32_t h = m / 2;
+    const Pair c = self(self, h);
+    const uint32_t of_m = m <= kLeafSize ? 1 : (m % 2 == 0 ? 1 + 2 * c.of_m : 1 + c.of_m + c.of_next);
+    const uint32_t of_next = m % 2 == 0 ? 1 + c.of_m + c.of_next : 1 + 2 * c.of_next;
+    return {of_m, of_next};
+  };
+  return counts(counts, triangles).of_m;
 }
 
 void WindingNumber::build(uint32_t begin, uint32_t end, uint32_t id) {
