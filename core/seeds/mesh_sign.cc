@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <tuple>
 #include <unordered_map>
+#include <utility>
 
 #include <embree3/rtcore.h>
 #include <fmt/format.h>
@@ -286,8 +287,8 @@ struct MeshSign::Tables {
   /// and voxels then bound their distance from a few pieces): every piece not listed is at least `cap` from center.
   struct NearBoundary {
     Vec3d center;
-    double reach = 0, cap = 0;
-    std::vector<uint32_t> pieces;
+    double cap = 0;
+    std::vector<std::pair<uint32_t, double>> pieces;  // a piece, its squared distance from center
   };
   void findNearBoundary(const Vec3d& center, double reach, NearBoundary* near) const;
   /// A lower bound on the distance (frame units) from every point within `radius` of p to the boundary curves, p
@@ -451,14 +452,15 @@ void MeshSign::Tables::buildBoundaryPieces() {
 }
 
 void MeshSign::Tables::findNearBoundary(const Vec3d& center, double reach, NearBoundary* near) const {
-  near->center = center, near->reach = reach;
+  near->center = center;
   near->cap = std::numeric_limits<double>::infinity();
   near->pieces.clear();
   if (boundary_pieces.empty()) return;
   double best2 = std::numeric_limits<double>::infinity();
   auto consider = [&](uint32_t k) {
-    best2 = std::min(best2, segmentDistance2(center, boundary_pieces[k].a, boundary_pieces[k].b));
-    near->pieces.push_back(k);
+    const double d2 = segmentDistance2(center, boundary_pieces[k].a, boundary_pieces[k].b);
+    best2 = std::min(best2, d2);
+    near->pieces.emplace_back(k, d2);
   };
   if (boundary_cells.empty()) {
     for (uint32_t k = 0; k < boundary_pieces.size(); ++k) consider(k);
@@ -476,15 +478,13 @@ void MeshSign::Tables::findNearBoundary(const Vec3d& center, double reach, NearB
   }
   // A piece farther from the center than the nearest by more than 2 reach is nobody's nearest within reach.
   const double keep = std::sqrt(best2) + 2 * reach;
-  std::erase_if(near->pieces, [&](uint32_t k) {
-    return segmentDistance2(center, boundary_pieces[k].a, boundary_pieces[k].b) > keep * keep;
-  });
+  std::erase_if(near->pieces, [&](const auto& piece) { return piece.second > keep * keep; });
 }
 
 double MeshSign::Tables::boundaryDistance(const NearBoundary& near, const Vec3d& p, double radius) const {
   if (boundary_pieces.empty()) return kFarFromBoundary;
   double best2 = std::numeric_limits<double>::infinity();
-  for (uint32_t k : near.pieces)
+  for (const auto& [k, d2] : near.pieces)
     best2 = std::min(best2, segmentDistance2(p, boundary_pieces[k].a, boundary_pieces[k].b));
   const double cap = near.cap - (p - near.center).length();
   return std::max(0.0, std::min(std::sqrt(best2), cap) - radius);
