@@ -2,11 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <numbers>
+#include <unordered_map>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
+#include <tbb/parallel_sort.h>
 
 namespace distband {
 namespace {
@@ -216,6 +219,82 @@ double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance, doubl
     }
   }
   return (far + 2.0 * near.radians()) / (4.0 * std::numbers::pi);
+}
+
+std::vector<ChainEdge> meshBoundaryChain(std::span<const std::array<uint32_t, 3>> triangles) {
+  // Each use of an edge as one key: its lower vertex, its higher vertex, and whether it runs downwards.
+  std::vector<uint64_t> uses(3 * triangles.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, triangles.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t t = r.begin(); t != r.end(); ++t)
+      for (int e = 0; e < 3; ++e) {
+        const uint64_t a = triangles[t][e], b = triangles[t][(e + 1) % 3];
+        uses[3 * t + e] = std::min(a, b) << 33 | std::max(a, b) << 1 | (a > b ? 1 : 0);
+      }
+  });
+  tbb::parallel_sort(uses.begin(), uses.end());
+  std::vector<ChainEdge> chain;
+  for (size_t i = 0; i < uses.size();) {
+    size_t j = i;
+    int64_t net = 0;
+    for (; j < uses.size() && uses[j] >> 1 == uses[i] >> 1; ++j) net += (uses[j] & 1) ? -1 : 1;
+    const auto a = uint32_t(uses[i] >> 33), b = uint32_t(uses[i] >> 1);
+    if (a != b && (j - i != 2 || net != 0)) chain.push_back({a, b, int32_t(net), uint32_t(j - i)});
+    i = j;
+  }
+  return chain;
+}
+
+std::vector<std::array<Vec3d, 3>> boundaryFans(std::span<const Vec3d> vertices, std::span<const ChainEdge> chain) {
+  struct Directed {
+    uint32_t from, to;
+  };
+  std::vector<Directed> edges;
+  for (const ChainEdge& e : chain)
+    for (int32_t k = 0; k < std::abs(e.net); ++k) edges.push_back(e.net > 0 ? Directed{e.a, e.b} : Directed{e.b, e.a});
+  std::sort(edges.begin(), edges.end(),
+            [](const Directed& x, const Directed& y) { return x.from != y.from ? x.from < y.from : x.to < y.to; });
+  std::vector<char> used(edges.size(), 0);
+  std::unordered_map<uint32_t, size_t> next_out;  // a vertex's first outgoing edge not yet walked
+  const auto take = [&](uint32_t v) -> size_t {
+    auto [it, fresh] = next_out.try_emplace(v, 0);
+    if (fresh)
+      it->second = size_t(std::lower_bound(edges.begin(), edges.end(), v,
+                                           [](const Directed& e, uint32_t from) { return e.from < from; }) -
+                          edges.begin());
+    for (size_t& i = it->second; i < edges.size() && edges[i].from == v; ++i)
+      if (!used[i]) return used[i] = 1, i++;
+    return edges.size();
+  };
+  // Off-centre by irrational fractions of the walk's extent: an apex at a lattice point (symmetric holes on a grid)
+  // would put every fan edge through a voxel where the fan's solid angles are undefined.
+  const Vec3d kApexShift{(std::numbers::sqrt2 - 1) * 1e-3, (std::numbers::sqrt3 - 1) * 1e-3,
+                         (std::sqrt(5.0) - 2) * 1e-3};
+  std::vector<std::array<Vec3d, 3>> fans;
+  std::vector<uint32_t> walk;
+  for (size_t s = 0; s < edges.size(); ++s) {
+    if (used[s]) continue;
+    // In-degree equals out-degree at every vertex of a boundary, so a walk that leaves its start returns to it.
+    used[s] = 1;
+    walk.assign(1, edges[s].from);
+    for (uint32_t v = edges[s].to; v != walk[0];) {
+      walk.push_back(v);
+      const size_t e = take(v);
+      if (e == edges.size()) return {};  // not a boundary (never for a mesh's chain)
+      v = edges[e].to;
+    }
+    Vec3d centre{};
+    for (uint32_t v : walk) centre = centre + vertices[v];
+    centre = centre * (1.0 / double(walk.size()));
+    double extent = 0;
+    for (uint32_t v : walk) {
+      const Vec3d d = vertices[v] - centre;
+      extent = std::max({extent, std::abs(d.x), std::abs(d.y), std::abs(d.z)});
+    }
+    const Vec3d apex = centre + kApexShift * extent;
+    for (size_t i = 0; i < walk.size(); ++i)
+      fans.push_back({apex, vertices[walk[i]], vertices[walk[(i + 1) % walk.size()]]});
+  }
+  return fans;
 }
 
 }  // namespace distband

@@ -12,6 +12,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "core/interrupter.h"
@@ -68,5 +69,22 @@ class WindingNumber {
   double beta2_;
   const Interrupter* interrupter_ = nullptr;  ///< during the build only
 };
+
+/// An edge of a mesh's boundary as a chain (vertex ids a < b): an edge the triangles do not use as a consistently
+/// oriented manifold edge (used once, three or more times, or twice the same way), with how many triangles run it from
+/// a to b less how many run it from b to a (`net`; 0 for an edge that is non-manifold but balanced).
+struct ChainEdge {
+  uint32_t a, b;
+  int32_t net;
+  uint32_t uses;
+};
+/// The boundary chain of `triangles` (vertex ids below 2^31), sorted by (a, b). O(T log T), in parallel.
+std::vector<ChainEdge> meshBoundaryChain(std::span<const std::array<uint32_t, 3>> triangles);
+
+/// Fans that close a boundary chain: the chain (its edges taken |net| times, in the direction of net's sign) split
+/// into closed walks, each closed by a fan of triangles from a point near its vertices' centroid. The fans and the
+/// mesh have the same boundary, so off both their winding numbers differ by an integer: w(mesh) = w(fans) + k, and
+/// an estimate of w(mesh) within 1/2 gives k. The fans have sum |net| triangles. Empty when the chain is empty.
+std::vector<std::array<Vec3d, 3>> boundaryFans(std::span<const Vec3d> vertices, std::span<const ChainEdge> chain);
 
 }  // namespace distband

@@ -4,7 +4,6 @@
 #include <bit>
 #include <cmath>
 #include <limits>
-#include <mutex>
 #include <numbers>
 #include <span>
 #include <stdexcept>
@@ -16,8 +15,6 @@
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
-#include <tbb/task_arena.h>
 
 #include "core/geometry.h"
 #include "core/mesh/winding_number.h"
@@ -201,6 +198,15 @@ struct WindingTier {
 constexpr WindingTier kWindingTiers[] = {
     {&WindingNumber::roughQuery, 0.3}, {&WindingNumber::coarseQuery, 0.1}, {&WindingNumber::query, 0.03}};
 constexpr double kWindingQueryError = kWindingTiers[std::size(kWindingTiers) - 1].error;  // the finest
+// On a sheet the winding number is 1/2 (the mean of its two sides): a voxel on an open disk, whose w is 1/2 there
+// and below it everywhere else, takes the outside by its rounding alone. Ties within this go outside.
+constexpr double kOnSheetTie = 1e-9;
+bool insideByWinding(double w) { return w > 0.5 + kOnSheetTie; }
+// The boundary fans' tier (MeshSign::Tables::fans) reads their winding number with the finest query: its value is as
+// good as that query's.
+constexpr double kFanTierError = kWindingQueryError;
+// Fans of more triangles than this share of the mesh's would cost about a mesh query each: not built.
+constexpr size_t kMaxFansPerTriangle = 2;  // one fan triangle per this many mesh triangles
 
 }  // namespace
 
@@ -219,6 +225,9 @@ struct MeshSign::Tables {
   std::vector<uint32_t> edge_mate;
   std::vector<std::pair<uint64_t, Normal3f>> shared_edge_n;  // sorted by half-edge 3 t + e
   std::unique_ptr<WindingNumber> winding;
+  /// Winding: the fans that close the mesh's boundary (core/mesh/winding_number.h: boundaryFans), whose winding number
+  /// differs from the mesh's by an integer; null when the mesh has no boundary or too long a one.
+  std::unique_ptr<WindingNumber> fans;
   std::unique_ptr<ParityScene> parity;
   uint64_t triangles = 0;
   /// Winding: the boundary and non-manifold edges, the curves the winding number turns around without crossing the
@@ -281,8 +290,7 @@ struct MeshSign::Tables {
   }
 
   void buildPseudonormals(const Interrupter* interrupter);
-  void buildBoundaryPieces();
-  std::once_flag boundary_once;
+  void buildBoundaryPieces(std::span<const ChainEdge> chain);
   /// The boundary pieces that can be nearest to a point within `reach` of `center` (found once for a brick, its boxes
   /// and voxels then bound their distance from a few pieces): every piece not listed is at least `cap` from center.
   struct NearBoundary {
@@ -298,13 +306,24 @@ struct MeshSign::Tables {
   /// value returned.
   double windingAt(const Vec3d& p, double* error) const;
   /// The winding number at p by the cheapest tier whose value and error bound satisfy `decides(value, error)`, else
-  /// by the finest; `error` gets the error bound of the value returned.
+  /// by the finest; `error` gets the error bound of the value returned. When the rough value does not decide, the
+  /// boundary fans' winding number (a query of the few fan triangles near p) plus the integer that brings it within
+  /// the rough value's error of it is as good as the finest query, and cheaper than the coarse one: the whole mesh's
+  /// near field is replaced by the boundary's. Should the rough value lie farther from every such sum than its error
+  /// bound allows (it never has), the mesh's tiers go on.
   template <class Decides>
   double windingUntil(const Vec3d& p, const Decides& decides, double* error) const {
     double w = 0;
     for (const WindingTier& tier : kWindingTiers) {
       w = ((*winding).*tier.query)(p), *error = tier.error;
       if (decides(w, *error)) break;
+      if (fans && tier.query == &WindingNumber::roughQuery) {
+        const double fan = fans->query(p), k = std::round(w - fan);
+        if (std::abs(w - fan - k) <= tier.error + kFanTierError) {
+          *error = kFanTierError;
+          return fan + k;
+        }
+      }
     }
     return w;
   }
@@ -425,26 +444,14 @@ double segmentDistance2(const Vec3d& p, const Vec3d& a, const Vec3d& b) {
   return (p - (a + ab * t)).lengthSqr();
 }
 
-void MeshSign::Tables::buildBoundaryPieces() {
-  const size_t nt = corners.size();
-  std::vector<uint64_t> edges(3 * nt);
-  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
-    for (int e = 0; e < 3; ++e) {
-      const uint64_t a = corners[t][e], b = corners[t][(e + 1) % 3];
-      edges[3 * t + e] = std::min(a, b) << 32 | std::max(a, b);
-    }
-  });
-  tbb::parallel_sort(edges.begin(), edges.end());
-  for (size_t i = 0; i < edges.size();) {
-    size_t j = i;
-    while (j < edges.size() && edges[j] == edges[i]) ++j;
-    if (j - i != 2) {  // a boundary edge (one use) or a non-manifold one (three or more)
-      const Vec3d a = verts[edges[i] >> 32], b = verts[edges[i] & 0xFFFFFFFFu];
-      const int n = std::max(1, int(std::ceil((b - a).length() / kBoundaryPiece)));
-      for (int k = 0; k < n; ++k)
-        boundary_pieces.push_back({a + (b - a) * (double(k) / n), a + (b - a) * (double(k + 1) / n)});
-    }
-    i = j;
+void MeshSign::Tables::buildBoundaryPieces(std::span<const ChainEdge> chain) {
+  // Every edge of the chain: a boundary edge (one use), a non-manifold one (three or more), or one two faces run the
+  // same way (an open part's flipped patch: the winding number turns twice around it).
+  for (const ChainEdge& edge : chain) {
+    const Vec3d a = verts[edge.a], b = verts[edge.b];
+    const int n = std::max(1, int(std::ceil((b - a).length() / kBoundaryPiece)));
+    for (int k = 0; k < n; ++k)
+      boundary_pieces.push_back({a + (b - a) * (double(k) / n), a + (b - a) * (double(k + 1) / n)});
   }
   if (boundary_pieces.size() <= kBoundaryBrutePieces) return;
   for (size_t k = 0; k < boundary_pieces.size(); ++k)
@@ -576,6 +583,9 @@ Status MeshSign::build(std::shared_ptr<const std::vector<Vec3d>> vertices,
   for (const auto& t : *triangles)
     for (uint32_t i : t)
       if (i >= vertices->size()) return Status::InvalidArgument("a triangle refers to a vertex that does not exist");
+  if (method == SignMethod::kWinding && vertices->size() >= (uint64_t(1) << 31))
+    return Status::InvalidArgument(
+        fmt::format("the winding sign takes at most 2^31 vertices (the mesh has {})", vertices->size()));
   std::unique_ptr<MeshSign> sign(new MeshSign(method));
   Tables& tables = *sign->tables_;
   tables.triangles = triangles->size();
@@ -606,10 +616,17 @@ Status MeshSign::build(std::shared_ptr<const std::vector<Vec3d>> vertices,
       std::vector<uint32_t>().swap(vertex_part);
       if (!isInterrupted(interrupter))
         tables.winding = std::make_unique<WindingNumber>(std::move(tris), 2.0, interrupter);
-      // The certificate that signs most bricks with one query (signWindingCertified) reads pseudonormals, and each
-      // triangle's distance from the boundary, built in the grid's frame on the first signed brick.
+      // The certificate that signs most bricks with one query (signWindingCertified) reads pseudonormals and the
+      // boundary's pieces; the fans closing the boundary make a cheap exact tier near it (windingUntil).
       keepTables();
       if (!isInterrupted(interrupter)) tables.buildPseudonormals(interrupter);
+      if (!isInterrupted(interrupter)) {
+        const std::vector<ChainEdge> chain = meshBoundaryChain(tables.corners);
+        tables.buildBoundaryPieces(chain);
+        std::vector<std::array<Vec3d, 3>> fans = boundaryFans(tables.verts, chain);
+        if (!fans.empty() && fans.size() * kMaxFansPerTriangle <= tables.corners.size())
+          tables.fans = std::make_unique<WindingNumber>(std::move(fans), 2.0, interrupter);
+      }
     } else {
       tables.parity = std::make_unique<ParityScene>(tris, interrupter);
       if (!isInterrupted(interrupter) && !tables.parity->ok())
@@ -626,7 +643,7 @@ bool MeshSign::inside(const Vec3d& p, uint32_t triangle, double distance) const 
     case SignMethod::kPseudonormal: return tables_->insidePseudonormal(p, triangle, distance);
     case SignMethod::kWinding: {
       double error;
-      return tables_->windingAt(p, &error) > 0.5;
+      return insideByWinding(tables_->windingAt(p, &error));
     }
     case SignMethod::kParity: return tables_->parity->inside(p);
     default: return false;
@@ -691,9 +708,6 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   double brick_boundary = 0;
   Tables::NearBoundary near;  // winding: the boundary pieces near the brick
   if (method_ == SignMethod::kWinding) {
-    // Isolated: a thread that waits for the build inside it must not pick up another brick's task meanwhile.
-    std::call_once(tables_->boundary_once,
-                   [&] { tbb::this_task_arena::isolate([&] { tables_->buildBoundaryPieces(); }); });
     auto boxCenter = [&](const Coord& lo, double half) {  // of the voxels lo .. lo + 2 half, in frame units
       return Vec3d{(lo.x + half) * scale.x, (lo.y + half) * scale.y, (lo.z + half) * scale.z};
     };
@@ -757,7 +771,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
       if (method_ == SignMethod::kWinding) {
         double error;
         const double w = s.windingAt(p, &error);
-        in = w > 0.5;
+        in = insideByWinding(w);
         // The path from the ball's centre to a voxel it signs lies in the brick and in the ball.
         const double boundary =
             sites[i] == kNoSite ? 0 : std::max(brick_boundary, r > 0 ? s.boundaryDistance(near, p, r) : 0.0);
@@ -784,6 +798,7 @@ uint64_t MeshSign::memoryBytes() const {
                    t.boundary_cells.size() * (sizeof(Coord) + 2 * sizeof(void*) + sizeof(std::vector<uint32_t>)) +
                    t.boundary_pieces.size() * sizeof(uint32_t) + t.part.capacity() * sizeof(uint32_t);
   if (t.winding) bytes += t.winding->memoryBytes();
+  if (t.fans) bytes += t.fans->memoryBytes();
   if (t.parity) bytes += estimateBytes(SignMethod::kParity, 0, t.triangles);
   return bytes;
 }
@@ -798,8 +813,11 @@ uint64_t MeshSign::estimateBytes(SignMethod method, uint64_t vertices, uint64_t 
                           3 * sizeof(double));
     case SignMethod::kWinding:
       // The triangles, twice while the tree is built, with their centroids then, about two nodes per leaf of a few
-      // triangles, and each triangle's part.
-      return triangles * (2 * sizeof(std::array<Vec3d, 3>) + sizeof(Vec3d) + 64 + sizeof(uint32_t));
+      // triangles, and each triangle's part; then each edge use's key (the boundary chain) and the boundary fans'
+      // tree, at most one fan triangle per kMaxFansPerTriangle.
+      return triangles * (2 * sizeof(std::array<Vec3d, 3>) + sizeof(Vec3d) + 64 + sizeof(uint32_t)) +
+             triangles * 3 * sizeof(uint64_t) +
+             triangles / kMaxFansPerTriangle * (2 * sizeof(std::array<Vec3d, 3>) + sizeof(Vec3d) + 64);
     case SignMethod::kParity:
       // Embree's float vertices, indices and BVH (a generous 3x the buffers), and the triangles it is built from.
       return triangles * (sizeof(std::array<Vec3d, 3>) + 4 * (36 + 12));

@@ -122,5 +122,99 @@ TEST(WindingNumberTest, EachQueryStaysWithinItsErrorNearOpenMeshes) {
   }
 }
 
+// The boundary fans (core/mesh/winding_number.h: boundaryFans) have the mesh's boundary, so the mesh's exact winding
+// number minus theirs is an integer everywhere off both (the brute oracle of tests/support for both sums). Meshes: the
+// teapot (open, three parts), a bunny with every 40th face removed, a closed bunny (no boundary, no fans), an open
+// square with a flipped patch (edges run twice the same way: net 2), a box without its top whose rim's centroid is a
+// lattice point (the fan's apex must be moved off it), and a fin of three faces on one edge (non-manifold).
+TEST(WindingNumberTest, BoundaryFansDifferFromTheMeshByAnInteger) {
+  std::vector<std::pair<std::string, TriangleMesh>> meshes;
+  for (const char* name : {"teapot.obj", "bunny.obj"}) {
+    TriangleMesh mesh;
+    ASSERT_TRUE(IsOk(loadMesh(std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/" + name, &mesh, nullptr)));
+    meshes.emplace_back(name, mesh);
+    if (std::string(name) == "bunny.obj") {
+      TriangleMesh holed = mesh;
+      holed.triangles.clear();
+      for (size_t t = 0; t < mesh.triangles.size(); ++t)
+        if (t % 40 != 0) holed.triangles.push_back(mesh.triangles[t]);
+      meshes.emplace_back("bunny, holes", holed);
+    }
+  }
+  TriangleMesh disk;  // a 9 x 9 lattice square at z = 8, as 128 triangles
+  for (int y = 0; y <= 8; ++y)
+    for (int x = 0; x <= 8; ++x) disk.vertices.push_back({double(x), double(y), 8});
+  for (uint32_t y = 0; y < 8; ++y)
+    for (uint32_t x = 0; x < 8; ++x) {
+      const uint32_t v = 9 * y + x;
+      disk.triangles.push_back({v, v + 1, v + 10});
+      disk.triangles.push_back({v, v + 10, v + 9});
+    }
+  TriangleMesh strip = disk;  // the square with its middle column of squares flipped
+  for (size_t t = 0; t < strip.triangles.size(); ++t)
+    if ((t / 2) % 8 == 4) std::swap(strip.triangles[t][1], strip.triangles[t][2]);
+  meshes.emplace_back("flipped patch", strip);
+  // A box of side 8 on the lattice without its top: its rim's centroid (4, 4, 8) is a lattice point, and lattice
+  // points of the open top lie on the lines from it to the rim's corners.
+  TriangleMesh box = testing::makeBoxMesh({0, 0, 0}, {8, 8, 8});
+  std::erase_if(box.triangles, [&](const auto& t) {
+    return box.vertices[t[0]].z == 8 && box.vertices[t[1]].z == 8 && box.vertices[t[2]].z == 8;
+  });
+  meshes.emplace_back("open box", box);
+  TriangleMesh fin;
+  fin.vertices = {{0, 0, 0}, {0, 0, 4}, {3, 0, 1}, {-2, 2, 1}, {-1, -3, 2}};
+  fin.triangles = {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}};
+  meshes.emplace_back("fin", fin);
+  for (const auto& [name, mesh] : meshes) {
+    SCOPED_TRACE(name);
+    const std::vector<ChainEdge> chain = meshBoundaryChain(mesh.triangles);
+    const std::vector<std::array<Vec3d, 3>> fans = boundaryFans(mesh.vertices, chain);
+    int64_t net = 0, twice_one_way = 0;
+    for (const ChainEdge& e : chain) net += std::abs(e.net), twice_one_way += e.uses == 2;
+    EXPECT_EQ(fans.size(), size_t(net));
+    if (name == "bunny.obj") {
+      EXPECT_TRUE(chain.empty()) << "a closed mesh has no boundary";
+    } else if (name == "flipped patch") {
+      EXPECT_EQ(twice_one_way, 16) << "the patch's two seams of 8 edges";
+    } else if (name == "fin") {
+      EXPECT_EQ(chain.size(), 7u) << "the shared edge (3 uses) and the six free ones";
+    } else if (name == "open box") {
+      EXPECT_EQ(chain.size(), 4u) << "the rim";
+    }
+    TriangleMesh fan_mesh;
+    for (const auto& t : fans) {
+      const auto v = uint32_t(fan_mesh.vertices.size());
+      fan_mesh.vertices.insert(fan_mesh.vertices.end(), t.begin(), t.end());
+      fan_mesh.triangles.push_back({v, v + 1, v + 2});
+    }
+    Vec3d lo = mesh.vertices[0], hi = lo;
+    for (const Vec3d& v : mesh.vertices) {
+      lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
+      hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
+    }
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-0.2, 1.2);
+    int fractional = 0;
+    auto check = [&](const Vec3d& p) {
+      const double w = testing::bruteWinding(mesh, p), diff = w - testing::bruteWinding(fan_mesh, p);
+      ASSERT_NEAR(diff, std::round(diff), 1e-9) << p.x << "," << p.y << "," << p.z << " w " << w;
+      fractional += std::abs(w - std::round(w)) > 0.01;
+    };
+    for (int i = 0; i < 400; ++i)
+      check({lo.x + u(rng) * (hi.x - lo.x), lo.y + u(rng) * (hi.y - lo.y), lo.z + u(rng) * (hi.z - lo.z)});
+    for (int z = 7; z <= 9 && (name == "flipped patch" || name == "open box"); ++z)  // the lattice near the square
+      for (int y = -1; y <= 9; ++y)
+        for (int x = -1; x <= 9; ++x) {
+          if (z == 8 && name == "flipped patch") continue;  // on the sheet
+          const bool on_side = (x == 0 || x == 8 || y == 0 || y == 8) && x >= 0 && x <= 8 && y >= 0 && y <= 8;
+          if (name == "open box" && on_side && z <= 8) continue;  // on the box's sides or rim
+          check({double(x), double(y), double(z)});
+        }
+    if (!chain.empty()) {
+      EXPECT_GT(fractional, 40) << "points where the winding number is not an integer";
+    }
+  }
+}
+
 }  // namespace
 }  // namespace distband
