@@ -244,6 +244,46 @@ std::vector<ChainEdge> meshBoundaryChain(std::span<const std::array<uint32_t, 3>
   return chain;
 }
 
+namespace {
+// Closes a closed walk with fans of small triangles: each arc of kFanArc edges takes a fan from a point near its
+// centroid, and the walk through the arcs' ends and those points (a quarter as long) is closed the same way, until
+// one fan closes a walk of kFanArc edges or fewer. Near a point of the walk only a few small triangles lie close
+// (one fan from the whole walk's centroid would put every triangle within a cluster radius of it: a query would sum
+// them all). The apexes lie off the centroids by irrational fractions of the arc's extent: an apex at a lattice point
+// (symmetric holes on a grid) would put fan edges through voxels, where the fans' solid angles are undefined.
+constexpr size_t kFanArc = 8;
+void closeWalk(std::vector<Vec3d> walk, std::vector<std::array<Vec3d, 3>>* fans) {
+  const Vec3d kApexShift{(std::numbers::sqrt2 - 1) * 1e-3, (std::numbers::sqrt3 - 1) * 1e-3,
+                         (std::sqrt(5.0) - 2) * 1e-3};
+  const auto fan = [&](size_t begin, size_t end) {  // over edges begin .. end - 1 of the walk; returns the apex
+    const size_t n = walk.size();
+    Vec3d centre{};
+    for (size_t i = begin; i <= end; ++i) centre = centre + walk[i % n];
+    centre = centre * (1.0 / double(end - begin + 1));
+    double extent = 0;
+    for (size_t i = begin; i <= end; ++i) {
+      const Vec3d d = walk[i % n] - centre;
+      extent = std::max({extent, std::abs(d.x), std::abs(d.y), std::abs(d.z)});
+    }
+    const Vec3d apex = centre + kApexShift * extent;
+    for (size_t i = begin; i < end; ++i) fans->push_back({apex, walk[i % n], walk[(i + 1) % n]});
+    return apex;
+  };
+  while (walk.size() > kFanArc) {
+    // The fans' boundary is the walk plus, for each arc, its end -> apex -> its start: the next walk runs the other
+    // way, start -> apex -> end, so that the whole cap's boundary is the walk.
+    std::vector<Vec3d> next;
+    for (size_t begin = 0; begin < walk.size(); begin += kFanArc) {
+      const Vec3d start = walk[begin];
+      next.push_back(start);
+      next.push_back(fan(begin, std::min(begin + kFanArc, walk.size())));
+    }
+    walk = std::move(next);
+  }
+  if (walk.size() >= 3) fan(0, walk.size());
+}
+}  // namespace
+
 std::vector<std::array<Vec3d, 3>> boundaryFans(std::span<const Vec3d> vertices, std::span<const ChainEdge> chain) {
   struct Directed {
     uint32_t from, to;
@@ -265,10 +305,6 @@ std::vector<std::array<Vec3d, 3>> boundaryFans(std::span<const Vec3d> vertices, 
       if (!used[i]) return used[i] = 1, i++;
     return edges.size();
   };
-  // Off-centre by irrational fractions of the walk's extent: an apex at a lattice point (symmetric holes on a grid)
-  // would put every fan edge through a voxel where the fan's solid angles are undefined.
-  const Vec3d kApexShift{(std::numbers::sqrt2 - 1) * 1e-3, (std::numbers::sqrt3 - 1) * 1e-3,
-                         (std::sqrt(5.0) - 2) * 1e-3};
   std::vector<std::array<Vec3d, 3>> fans;
   std::vector<uint32_t> walk;
   for (size_t s = 0; s < edges.size(); ++s) {
@@ -282,17 +318,9 @@ std::vector<std::array<Vec3d, 3>> boundaryFans(std::span<const Vec3d> vertices, 
       if (e == edges.size()) return {};  // not a boundary (never for a mesh's chain)
       v = edges[e].to;
     }
-    Vec3d centre{};
-    for (uint32_t v : walk) centre = centre + vertices[v];
-    centre = centre * (1.0 / double(walk.size()));
-    double extent = 0;
-    for (uint32_t v : walk) {
-      const Vec3d d = vertices[v] - centre;
-      extent = std::max({extent, std::abs(d.x), std::abs(d.y), std::abs(d.z)});
-    }
-    const Vec3d apex = centre + kApexShift * extent;
-    for (size_t i = 0; i < walk.size(); ++i)
-      fans.push_back({apex, vertices[walk[i]], vertices[walk[(i + 1) % walk.size()]]});
+    std::vector<Vec3d> points(walk.size());
+    for (size_t i = 0; i < walk.size(); ++i) points[i] = vertices[walk[i]];
+    closeWalk(std::move(points), &fans);
   }
   return fans;
 }

@@ -82,9 +82,10 @@ struct ChainEdge {
 std::vector<ChainEdge> meshBoundaryChain(std::span<const std::array<uint32_t, 3>> triangles);
 
 /// Fans that close a boundary chain: the chain (its edges taken |net| times, in the direction of net's sign) split
-/// into closed walks, each closed by a fan of triangles from a point near its vertices' centroid. The fans and the
-/// mesh have the same boundary, so off both their winding numbers differ by an integer: w(mesh) = w(fans) + k, and
-/// an estimate of w(mesh) within 1/2 gives k. The fans have sum |net| triangles. Empty when the chain is empty.
+/// into closed walks, each closed by fans of small triangles (one from near the centroid of each arc of a few edges,
+/// then the same over the shorter walk through the arcs' ends and the fans' apexes). The fans and the mesh have the
+/// same boundary, so off both their winding numbers differ by an integer: w(mesh) = w(fans) + k, and an estimate of
+/// w(mesh) within 1/2 gives k. About 4/3 sum |net| triangles; empty when the chain is empty.
 std::vector<std::array<Vec3d, 3>> boundaryFans(std::span<const Vec3d> vertices, std::span<const ChainEdge> chain);
 
 }  // namespace distband

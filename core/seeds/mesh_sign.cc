@@ -202,6 +202,8 @@ constexpr double kWindingQueryError = kWindingTiers[std::size(kWindingTiers) - 1
 // and below it everywhere else, takes the outside by its rounding alone. Ties within this go outside.
 constexpr double kOnSheetTie = 1e-9;
 bool insideByWinding(double w) { return w > 0.5 + kOnSheetTie; }
+// Voxels nearer the surface than this (voxels) lie on it, up to the distance's rounding.
+constexpr double kOnSheet = 1e-6;
 // The boundary fans' tier (MeshSign::Tables::fans) reads their winding number with the finest query: its value is as
 // good as that query's.
 constexpr double kFanTierError = kWindingQueryError;
@@ -768,7 +770,11 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     if (!found) {
       const double dist = std::abs(brick.values[i]) / voxel_size;
       const double r = dist - 1.0;
-      if (method_ == SignMethod::kWinding) {
+      if (method_ == SignMethod::kWinding && dist < kOnSheet) {
+        // On a sheet the winding number is its two sides' mean, which the tiers read only to within their error (the
+        // fans' tier gets one side's value or the other's): the sign of a zero distance goes outside, as ties do.
+        in = false;
+      } else if (method_ == SignMethod::kWinding) {
         double error;
         const double w = s.windingAt(p, &error);
         in = insideByWinding(w);
