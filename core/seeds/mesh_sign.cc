@@ -207,8 +207,9 @@ constexpr double kOnSheet = 1e-6;
 // The boundary fans' tier (MeshSign::Tables::fans) reads their winding number with the finest query: its value is as
 // good as that query's.
 constexpr double kFanTierError = kWindingQueryError;
-// Fans of more triangles than this share of the mesh's would cost about a mesh query each: not built.
-constexpr size_t kMaxFansPerTriangle = 2;  // one fan triangle per this many mesh triangles
+// At most one fan triangle per this many mesh triangles (a mesh with more boundary, e.g. a soup whose triangles share
+// no vertex, keeps the mesh's tiers): the fans' tree stays an eighth of the mesh's in memory budgets (estimateBytes).
+constexpr size_t kMaxFansPerTriangle = 8;
 
 }  // namespace
 

@@ -484,8 +484,12 @@ TEST(MeshSeedsTest, SignSharesCountEveryDeliveredVoxelOnceUnderItsTest) {
     const std::string name(signMethodName(c.sign));
     ASSERT_GT(delivered, 10000) << name;
     EXPECT_EQ(got.total(), delivered) << name;
-    if (c.sign == SignMethod::kPseudonormal) EXPECT_EQ(got.pseudonormal, delivered);
-    if (c.sign == SignMethod::kParity) EXPECT_EQ(got.parity, delivered);
+    if (c.sign == SignMethod::kPseudonormal) {
+      EXPECT_EQ(got.pseudonormal, delivered);
+    }
+    if (c.sign == SignMethod::kParity) {
+      EXPECT_EQ(got.parity, delivered);
+    }
     if (c.sign == SignMethod::kWinding) {
       std::printf("[sign shares] sphere with a hole, 48^3: %s\n", describeSignShares(got).c_str());
       EXPECT_GT(got.winding_certified, delivered / 2) << describeSignShares(got);
