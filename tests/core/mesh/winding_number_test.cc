@@ -20,6 +20,14 @@
 namespace distband {
 namespace {
 
+void boundsOf(const TriangleMesh& mesh, Vec3d* lo, Vec3d* hi) {
+  *lo = *hi = mesh.vertices[0];
+  for (const Vec3d& v : mesh.vertices) {
+    *lo = {std::min(lo->x, v.x), std::min(lo->y, v.y), std::min(lo->z, v.z)};
+    *hi = {std::max(hi->x, v.x), std::max(hi->y, v.y), std::max(hi->z, v.z)};
+  }
+}
+
 std::vector<std::array<Vec3d, 3>> trianglesOf(const TriangleMesh& mesh) {
   std::vector<std::array<Vec3d, 3>> tris;
   for (const auto& t : mesh.triangles) tris.push_back({mesh.vertices[t[0]], mesh.vertices[t[1]], mesh.vertices[t[2]]});
@@ -33,11 +41,8 @@ TEST(WindingNumberTest, TheComplexProductEqualsTheSumOfAtan2s) {
     ASSERT_TRUE(IsOk(loadMesh(std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/" + name, &mesh, nullptr)));
     // beta = infinity opens every cluster: query() sums every triangle through the product.
     const WindingNumber all(trianglesOf(mesh), std::numeric_limits<double>::infinity());
-    Vec3d lo = mesh.vertices[0], hi = lo;
-    for (const Vec3d& v : mesh.vertices) {
-      lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
-      hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
-    }
+    Vec3d lo, hi;
+    boundsOf(mesh, &lo, &hi);
     std::mt19937 rng(11);
     std::uniform_real_distribution<double> u(-0.2, 1.2);
     auto check = [&](const Vec3d& p) {
@@ -65,11 +70,8 @@ TEST(WindingNumberTest, InsideAClosedMeshIsOneAndOutsideZero) {
   TriangleMesh mesh;
   ASSERT_TRUE(IsOk(loadMesh(std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/bunny.obj", &mesh, nullptr)));
   const WindingNumber wn(trianglesOf(mesh));
-  Vec3d lo = mesh.vertices[0], hi = lo;
-  for (const Vec3d& v : mesh.vertices) {
-    lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
-    hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
-  }
+  Vec3d lo, hi;
+  boundsOf(mesh, &lo, &hi);
   // Within the first-order hierarchy's error (dipoles beyond beta = 2 cluster radii: a few hundredths), and four
   // full turns (4 pi of solid angle) counted inside.
   const Vec3d centre = (lo + hi) * 0.5;
@@ -87,11 +89,8 @@ TEST(WindingNumberTest, EachQueryStaysWithinItsErrorNearOpenMeshes) {
     SCOPED_TRACE(name);
     TriangleMesh mesh;
     ASSERT_TRUE(IsOk(loadMesh(std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/" + name, &mesh, nullptr)));
-    Vec3d lo = mesh.vertices[0], hi = lo;
-    for (const Vec3d& v : mesh.vertices) {
-      lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
-      hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
-    }
+    Vec3d lo, hi;
+    boundsOf(mesh, &lo, &hi);
     const double scale = 500.0 / std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
     std::vector<std::array<Vec3d, 3>> tris;
     for (size_t t = 0; t < mesh.triangles.size(); ++t) {
@@ -192,11 +191,8 @@ TEST(WindingNumberTest, BoundaryFansDifferFromTheMeshByAnInteger) {
       fan_mesh.vertices.insert(fan_mesh.vertices.end(), t.begin(), t.end());
       fan_mesh.triangles.push_back({v, v + 1, v + 2});
     }
-    Vec3d lo = mesh.vertices[0], hi = lo;
-    for (const Vec3d& v : mesh.vertices) {
-      lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
-      hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
-    }
+    Vec3d lo, hi;
+    boundsOf(mesh, &lo, &hi);
     std::mt19937 rng(7);
     std::uniform_real_distribution<double> u(-0.2, 1.2);
     int fractional = 0;
