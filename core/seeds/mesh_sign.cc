@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 #include <numbers>
 #include <span>
@@ -626,9 +627,10 @@ Status MeshSign::build(std::shared_ptr<const std::vector<Vec3d>> vertices,
       if (!isInterrupted(interrupter)) {
         const std::vector<ChainEdge> chain = meshBoundaryChain(tables.corners);
         tables.buildBoundaryPieces(chain);
-        std::vector<std::array<Vec3d, 3>> fans = boundaryFans(tables.verts, chain);
-        if (!fans.empty() && fans.size() * kMaxFansPerTriangle <= tables.corners.size())
-          tables.fans = std::make_unique<WindingNumber>(std::move(fans), 2.0, interrupter);
+        uint64_t walked = 0;  // the chain's edges with their multiplicity: the fans have at most 3/2 of these
+        for (const ChainEdge& e : chain) walked += uint64_t(std::abs(e.net));
+        if (walked > 0 && (3 * walked / 2 + 3) * kMaxFansPerTriangle <= tables.corners.size())
+          tables.fans = std::make_unique<WindingNumber>(boundaryFans(tables.verts, chain), 2.0, interrupter);
       }
     } else {
       tables.parity = std::make_unique<ParityScene>(tris, interrupter);
