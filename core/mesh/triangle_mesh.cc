@@ -24,15 +24,6 @@ std::array<uint64_t, 3> positionBits(const Vec3d& v) {
   return b;
 }
 
-// Edge keys for the edge statistics: the undirected edge {a, b} in the high bits and, when the vertex ids leave a
-// bit for it, the direction (a > b) in bit 0, so that one sort both groups a closed edge's two half-edges and tells
-// whether they run the same way (equal keys) at no extra cost.
-constexpr uint64_t kDirectedKeyVertexLimit = uint64_t(1) << 31;
-uint64_t edgeKey(uint64_t a, uint64_t b, bool directed) {
-  return directed ? std::min(a, b) << 33 | std::max(a, b) << 1 | uint64_t(a > b)
-                  : std::min(a, b) << 32 | std::max(a, b);
-}
-
 // Makes the faces of every edge-manifold closed component whose two faces at some edge traverse it the same way
 // consistent: breadth-first from the component's first face, a neighbour is flipped when it traverses the shared
 // edge the same way as the face reached first; then the component is flipped whole if its signed volume is negative

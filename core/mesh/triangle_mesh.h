@@ -14,6 +14,7 @@
 // asserts or crashes. Plain value types; not synchronised.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <string>
@@ -45,6 +46,16 @@ struct MeshReport {
   bool closed() const { return boundary_edges == 0 && non_manifold_edges == 0; }
   std::string summary() const;     ///< one line for logs and the CLI
 };
+
+/// A key for the use of edge {a, b} by a triangle that runs it from a to b: the undirected edge in the high bits and,
+/// when `directed` (both ids below kDirectedKeyVertexLimit), the direction (a > b) in bit 0, so that one sort both
+/// groups an edge's uses and tells which way each runs (the edge statistics, the boundary chain of
+/// core/mesh/winding_number.h).
+inline constexpr uint64_t kDirectedKeyVertexLimit = uint64_t(1) << 31;
+inline uint64_t edgeKey(uint64_t a, uint64_t b, bool directed) {
+  return directed ? std::min(a, b) << 33 | std::max(a, b) << 1 | uint64_t(a > b)
+                  : std::min(a, b) << 32 | std::max(a, b);
+}
 
 /// The connected parts of triangles over `vertex_count` vertices (triangles sharing a vertex are connected): sets
 /// (*part)[v] to vertex v's part, parts numbered in the order of their lowest vertex (a vertex no triangle uses is a

@@ -11,6 +11,8 @@
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_sort.h>
 
+#include "core/mesh/triangle_mesh.h"
+
 namespace distband {
 namespace {
 constexpr uint32_t kLeafSize = 8;
@@ -222,14 +224,11 @@ double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance, doubl
 }
 
 std::vector<ChainEdge> meshBoundaryChain(std::span<const std::array<uint32_t, 3>> triangles) {
-  // Each use of an edge as one key: its lower vertex, its higher vertex, and whether it runs downwards.
+  // Each use of an edge as one directed key (core/mesh/triangle_mesh.h: edgeKey).
   std::vector<uint64_t> uses(3 * triangles.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, triangles.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t t = r.begin(); t != r.end(); ++t)
-      for (int e = 0; e < 3; ++e) {
-        const uint64_t a = triangles[t][e], b = triangles[t][(e + 1) % 3];
-        uses[3 * t + e] = std::min(a, b) << 33 | std::max(a, b) << 1 | (a > b ? 1 : 0);
-      }
+      for (int e = 0; e < 3; ++e) uses[3 * t + e] = edgeKey(triangles[t][e], triangles[t][(e + 1) % 3], true);
   });
   tbb::parallel_sort(uses.begin(), uses.end());
   std::vector<ChainEdge> chain;

@@ -78,7 +78,8 @@ struct ChainEdge {
   int32_t net;
   uint32_t uses;
 };
-/// The boundary chain of `triangles` (vertex ids below 2^31), sorted by (a, b). O(T log T), in parallel.
+/// The boundary chain of `triangles` (vertex ids below kDirectedKeyVertexLimit, core/mesh/triangle_mesh.h), sorted by
+/// (a, b). O(T log T), in parallel.
 std::vector<ChainEdge> meshBoundaryChain(std::span<const std::array<uint32_t, 3>> triangles);
 
 /// Fans that close a boundary chain: the chain (its edges taken |net| times, in the direction of net's sign) split

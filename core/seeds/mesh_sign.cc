@@ -587,7 +587,7 @@ Status MeshSign::build(std::shared_ptr<const std::vector<Vec3d>> vertices,
   for (const auto& t : *triangles)
     for (uint32_t i : t)
       if (i >= vertices->size()) return Status::InvalidArgument("a triangle refers to a vertex that does not exist");
-  if (method == SignMethod::kWinding && vertices->size() >= (uint64_t(1) << 31))
+  if (method == SignMethod::kWinding && vertices->size() >= kDirectedKeyVertexLimit)
     return Status::InvalidArgument(
         fmt::format("the winding sign takes at most 2^31 vertices (the mesh has {})", vertices->size()));
   std::unique_ptr<MeshSign> sign(new MeshSign(method));
