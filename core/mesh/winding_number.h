@@ -40,6 +40,8 @@ class WindingNumber {
   double principalValue(uint32_t t) const;
   /// The exact sum over all triangles (O(T)); for checks.
   double exact(const Vec3d& p) const;
+  /// The most bytes a hierarchy of this many triangles holds, its build included (for memory budgets).
+  static uint64_t estimateBytes(uint64_t triangles);
   /// Bytes held (for memory budgets).
   uint64_t memoryBytes() const { return tris_.capacity() * sizeof(tris_[0]) + nodes_.capacity() * sizeof(Node); }
 
@@ -48,8 +50,9 @@ class WindingNumber {
     Vec3d center;     ///< area-weighted centroid of the node's triangles
     Vec3d area;       ///< sum of the triangles' area vectors (0.5 * (b - a) x (c - a))
     double abs_area;  ///< sum of the triangles' areas
-    /// Second-order moment: sum over the triangles of area vector (x) (centroid - center), row-major.
-    std::array<double, 9> moment;
+    /// Second-order moment: sum over the triangles of area vector (x) (centroid - center), row-major. Single
+    /// precision: the second-order term is a correction of at most 1/beta of the dipole's size.
+    std::array<float, 9> moment;
     double radius2;   ///< squared radius around center enclosing all their corners
     uint32_t begin, end;    ///< triangle range (leaves)
     uint32_t left, right;   ///< children, 0 for a leaf

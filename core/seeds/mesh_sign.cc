@@ -821,12 +821,10 @@ uint64_t MeshSign::estimateBytes(SignMethod method, uint64_t vertices, uint64_t 
              triangles * (sizeof(std::array<uint32_t, 3>) + sizeof(Normal3f) + 3 * sizeof(uint32_t) + sizeof(Vec3d) +
                           3 * sizeof(double));
     case SignMethod::kWinding: {
-      // A winding tree: its triangles, twice while it is built, with their centroids then, and about two nodes per
-      // leaf of a few triangles. The mesh's, with each triangle's part; then each edge use's key (the boundary chain)
-      // and the boundary fans' tree, at most one fan triangle per kMaxFansPerTriangle.
-      const uint64_t tree = 2 * sizeof(std::array<Vec3d, 3>) + sizeof(Vec3d) + 64;
-      return triangles * (tree + sizeof(uint32_t)) + triangles * 3 * sizeof(uint64_t) +
-             triangles / kMaxFansPerTriangle * tree;
+      // The mesh's winding tree, with each triangle's part; then each edge use's key (the boundary chain) and the
+      // boundary fans' tree, at most one fan triangle per kMaxFansPerTriangle.
+      return WindingNumber::estimateBytes(triangles) + triangles * sizeof(uint32_t) + triangles * 3 * sizeof(uint64_t) +
+             WindingNumber::estimateBytes(triangles / kMaxFansPerTriangle + 1);
     }
     case SignMethod::kParity:
       // Embree's float vertices, indices and BVH (a generous 3x the buffers), and the triangles it is built from.
