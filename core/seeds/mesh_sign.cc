@@ -237,10 +237,29 @@ struct MeshSign::Tables {
   /// Winding: the boundary and non-manifold edges, the curves the winding number turns around without crossing the
   /// surface, cut into pieces of at most kBoundaryPiece frame units, each filed under the cell of its midpoint.
   struct BoundaryPiece {
-    Vec3d a, b;
+    Vec3d a, ab;          // from a to a + ab
+    double inverse_len2;  // 1 / |ab|^2, 0 for a point
+    BoundaryPiece(const Vec3d& from, const Vec3d& to) : a(from), ab(to - from) {
+      const double len2 = ab.lengthSqr();
+      inverse_len2 = len2 > 0 ? 1 / len2 : 0;
+    }
+    /// The squared distance from p to the piece (every brick and certificate reads a few dozen: no division).
+    double distance2(const Vec3d& p) const {
+      const Vec3d ap = p - a;
+      const double t = std::clamp(ap.dot(ab) * inverse_len2, 0.0, 1.0);
+      return (ap - ab * t).lengthSqr();
+    }
   };
   std::vector<BoundaryPiece> boundary_pieces;
   std::unordered_map<Coord, std::vector<uint32_t>, CoordHash> boundary_cells;
+  /// Few pieces (no cells): consecutive groups of nearby pieces, each within a ball, so that a query reads the pieces
+  /// of the groups that can hold its nearest only.
+  struct PieceGroup {
+    Vec3d center;
+    double radius;
+    uint32_t begin, end;
+  };
+  std::vector<PieceGroup> piece_groups;
   /// Winding: each triangle's connected part (findMeshParts), empty when the mesh is one part. Parts may cross or nest,
   /// so the certificate takes a brick only when all its voxels' closest triangles belong to one part.
   std::vector<uint32_t> part;
@@ -293,6 +312,10 @@ struct MeshSign::Tables {
     return Normal3f(normalized(Vec3d{} + faceNormal(first) + faceNormal(second)));
   }
 
+  /// Signs the voxels of `subset` (delivered, each with a site) by the pseudonormal, keeping the last triangle's plane
+  /// (a brick's neighbouring voxels mostly share their closest triangle).
+  void signByPseudonormal(Brick& brick, const BrickMask& subset, const uint32_t* sites, const uint32_t* site_triangle,
+                          double voxel_size, const Vec3d& scale) const;
   void buildPseudonormals(const Interrupter* interrupter);
   void buildBoundaryPieces(std::span<const ChainEdge> chain);
   /// The boundary pieces that can be nearest to a point within `reach` of `center` (found once for a brick, its boxes
@@ -428,24 +451,18 @@ void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
   }
 }
 
-// The boundary curves in the grid's index frame (built on the first signed brick), cut into pieces no longer than
+// The boundary curves in the grid's index frame, cut into pieces no longer than
 // half a cell so that a piece lies within a quarter cell of the midpoint it is filed under; a query searches the
 // cells within kBoundaryRings of its own and bounds everything farther by the rings' reach. Distances are to the
 // edges themselves: a long boundary edge passes far from its vertices.
 constexpr double kBoundaryCell = 32, kBoundaryPiece = kBoundaryCell / 2;
 constexpr int kBoundaryRings = 2;
 constexpr size_t kBoundaryBrutePieces = 256;  // this few: every query reads them all, exactly, without a cap
+constexpr uint32_t kPieceGroup = 8;
 
 Coord boundaryCellOf(const Vec3d& p) {
   return {int(std::floor(p.x / kBoundaryCell)), int(std::floor(p.y / kBoundaryCell)),
           int(std::floor(p.z / kBoundaryCell))};
-}
-
-double segmentDistance2(const Vec3d& p, const Vec3d& a, const Vec3d& b) {
-  const Vec3d ab = b - a;
-  const double len2 = ab.lengthSqr();
-  const double t = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
-  return (p - (a + ab * t)).lengthSqr();
 }
 
 void MeshSign::Tables::buildBoundaryPieces(std::span<const ChainEdge> chain) {
@@ -455,11 +472,43 @@ void MeshSign::Tables::buildBoundaryPieces(std::span<const ChainEdge> chain) {
     const Vec3d a = verts[edge.a], b = verts[edge.b];
     const int n = std::max(1, int(std::ceil((b - a).length() / kBoundaryPiece)));
     for (int k = 0; k < n; ++k)
-      boundary_pieces.push_back({a + (b - a) * (double(k) / n), a + (b - a) * (double(k + 1) / n)});
+      boundary_pieces.emplace_back(a + (b - a) * (double(k) / n), a + (b - a) * (double(k + 1) / n));
   }
-  if (boundary_pieces.size() <= kBoundaryBrutePieces) return;
+  if (boundary_pieces.size() <= kBoundaryBrutePieces) {
+    // Groups of at most kPieceGroup pieces by halving along the longest extent of their midpoints.
+    const auto group = [&](const auto& self, uint32_t begin, uint32_t end) -> void {
+      const auto mid = [&](uint32_t k) { return boundary_pieces[k].a + boundary_pieces[k].ab * 0.5; };
+      Vec3d lo = mid(begin), hi = lo;
+      for (uint32_t k = begin; k < end; ++k) {
+        const Vec3d m = mid(k);
+        lo = {std::min(lo.x, m.x), std::min(lo.y, m.y), std::min(lo.z, m.z)};
+        hi = {std::max(hi.x, m.x), std::max(hi.y, m.y), std::max(hi.z, m.z)};
+      }
+      if (end - begin <= kPieceGroup) {
+        PieceGroup g{(lo + hi) * 0.5, 0, begin, end};
+        for (uint32_t k = begin; k < end; ++k)
+          g.radius = std::max({g.radius, (boundary_pieces[k].a - g.center).length(),
+                               (boundary_pieces[k].a + boundary_pieces[k].ab - g.center).length()});
+        piece_groups.push_back(g);
+        return;
+      }
+      const Vec3d e = hi - lo;
+      const int axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
+      const auto key = [&](const BoundaryPiece& piece) {
+        const Vec3d m = piece.a + piece.ab * 0.5;
+        return axis == 0 ? m.x : (axis == 1 ? m.y : m.z);
+      };
+      const uint32_t half = begin + (end - begin) / 2;
+      std::nth_element(boundary_pieces.begin() + begin, boundary_pieces.begin() + half, boundary_pieces.begin() + end,
+                       [&](const BoundaryPiece& x, const BoundaryPiece& y) { return key(x) < key(y); });
+      self(self, begin, half);
+      self(self, half, end);
+    };
+    if (!boundary_pieces.empty()) group(group, 0, uint32_t(boundary_pieces.size()));
+    return;
+  }
   for (size_t k = 0; k < boundary_pieces.size(); ++k)
-    boundary_cells[boundaryCellOf((boundary_pieces[k].a + boundary_pieces[k].b) * 0.5)].push_back(uint32_t(k));
+    boundary_cells[boundaryCellOf(boundary_pieces[k].a + boundary_pieces[k].ab * 0.5)].push_back(uint32_t(k));
 }
 
 void MeshSign::Tables::findNearBoundary(const Vec3d& center, double reach, NearBoundary* near) const {
@@ -467,38 +516,75 @@ void MeshSign::Tables::findNearBoundary(const Vec3d& center, double reach, NearB
   near->cap = std::numeric_limits<double>::infinity();
   near->pieces.clear();
   if (boundary_pieces.empty()) return;
-  double best2 = std::numeric_limits<double>::infinity();
-  auto consider = [&](uint32_t k) {
-    const double d2 = segmentDistance2(center, boundary_pieces[k].a, boundary_pieces[k].b);
-    best2 = std::min(best2, d2);
-    near->pieces.emplace_back(k, d2);
-  };
-  if (boundary_cells.empty()) {
-    for (uint32_t k = 0; k < boundary_pieces.size(); ++k) consider(k);
-  } else {
+  // The candidates: the pieces of the groups within `bound` of the center, or those filed within kBoundaryRings
+  // cells. Read twice, the nearest first, so that only the pieces near it are kept (a brick far from a short boundary
+  // would keep all of it).
+  std::array<double, kBoundaryBrutePieces> group_distance;         // to a group's center
+  double nearest_bound = std::numeric_limits<double>::infinity();  // the nearest piece is at most this far
+  for (size_t g = 0; g < piece_groups.size(); ++g) {
+    group_distance[g] = (center - piece_groups[g].center).length();
+    nearest_bound = std::min(nearest_bound, group_distance[g] + piece_groups[g].radius);
+  }
+  auto forEachCandidate = [&](double bound, auto&& visit) {
+    if (boundary_cells.empty()) {
+      for (size_t g = 0; g < piece_groups.size(); ++g)
+        if (group_distance[g] - piece_groups[g].radius <= bound)
+          for (uint32_t k = piece_groups[g].begin; k < piece_groups[g].end; ++k) visit(k);
+      return;
+    }
     const Coord home = boundaryCellOf(center);
     for (int z = -kBoundaryRings; z <= kBoundaryRings; ++z)
       for (int y = -kBoundaryRings; y <= kBoundaryRings; ++y)
         for (int x = -kBoundaryRings; x <= kBoundaryRings; ++x) {
           const auto it = boundary_cells.find(Coord{home.x + x, home.y + y, home.z + z});
           if (it == boundary_cells.end()) continue;
-          for (uint32_t k : it->second) consider(k);
+          for (uint32_t k : it->second) visit(k);
         }
-    // A piece not searched has its midpoint kBoundaryRings cells away or more, and lies within half a piece of it.
-    near->cap = kBoundaryRings * kBoundaryCell - kBoundaryPiece / 2;
-  }
+  };
+  double best2 = std::numeric_limits<double>::infinity();
+  forEachCandidate(nearest_bound, [&](uint32_t k) { best2 = std::min(best2, boundary_pieces[k].distance2(center)); });
+  // A piece not searched has its midpoint kBoundaryRings cells away or more, and lies within half a piece of it.
+  if (!boundary_cells.empty()) near->cap = kBoundaryRings * kBoundaryCell - kBoundaryPiece / 2;
+  if (best2 == std::numeric_limits<double>::infinity()) return;
   // A piece farther from the center than the nearest by more than 2 reach is nobody's nearest within reach.
   const double keep = std::sqrt(best2) + 2 * reach;
-  std::erase_if(near->pieces, [&](const auto& piece) { return piece.second > keep * keep; });
+  forEachCandidate(keep, [&](uint32_t k) {
+    const double d2 = boundary_pieces[k].distance2(center);
+    if (d2 <= keep * keep) near->pieces.emplace_back(k, d2);
+  });
 }
 
 double MeshSign::Tables::boundaryDistance(const NearBoundary& near, const Vec3d& p, double radius) const {
   if (boundary_pieces.empty()) return kFarFromBoundary;
   double best2 = std::numeric_limits<double>::infinity();
-  for (const auto& [k, d2] : near.pieces)
-    best2 = std::min(best2, segmentDistance2(p, boundary_pieces[k].a, boundary_pieces[k].b));
+  for (const auto& [k, d2] : near.pieces) best2 = std::min(best2, boundary_pieces[k].distance2(p));
   const double cap = near.cap - (p - near.center).length();
   return std::max(0.0, std::min(std::sqrt(best2), cap) - radius);
+}
+
+void MeshSign::Tables::signByPseudonormal(Brick& brick, const BrickMask& subset, const uint32_t* sites,
+                                          const uint32_t* site_triangle, double voxel_size, const Vec3d& scale) const {
+  uint32_t last = kNoSite;
+  Vec3d n{}, v0{};
+  for (int w = 0; w < kBrickVoxels / 64; ++w)
+    for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
+      const int i = w * 64 + std::countr_zero(bits);
+      if (sites[i] == kNoSite) continue;
+      const uint32_t t = site_triangle ? site_triangle[sites[i]] : sites[i];
+      if (t != last) {
+        n = {double(face_n[t].x), double(face_n[t].y), double(face_n[t].z)};
+        v0 = verts[corners[t][0]];
+        last = t;
+      }
+      const Coord c = brick.origin + brickLocal(i);
+      const Vec3d p{c.x * scale.x, c.y * scale.y, c.z * scale.z};
+      const double dist = std::abs(brick.values[i]) / voxel_size;
+      // insidePseudonormal, with the plane kept (the same arithmetic as Normal3f::dot).
+      const Vec3d q = p - v0;
+      const double plane = n.x * q.x + n.y * q.y + n.z * q.z;
+      if (planeDecides(plane, dist) ? plane < 0 : insideByClosestFeature(p, t))
+        brick.values[i] = -std::abs(brick.values[i]);
+    }
 }
 
 // Winding signs at the pseudonormal's price where that is provably the same answer. Across a consistently oriented
@@ -521,33 +607,57 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
     const Coord c = brick.origin + brickLocal(i);
     return Vec3d{c.x * scale.x, c.y * scale.y, c.z * scale.z};
   };
-  int ref = -1, n = 0;
-  uint32_t brick_part = 0;
-  double ref_to_center = std::numeric_limits<double>::infinity(), farthest = 0;
+  // Squared distances along each axis from a point to the brick's 8 planes of voxels: a voxel's squared distance is
+  // the sum of three table entries (the scans below read every voxel of the subset).
+  struct AxisTables {
+    std::array<double, kBrickSize> x, y, z;
+    AxisTables(const Coord& origin, const Vec3d& scale, const Vec3d& from) {
+      const auto square = [](double v) { return v * v; };
+      for (int l = 0; l < kBrickSize; ++l) {
+        x[l] = square((origin.x + l) * scale.x - from.x);
+        y[l] = square((origin.y + l) * scale.y - from.y);
+        z[l] = square((origin.z + l) * scale.z - from.z);
+      }
+    }
+    double distance2(int i) const {
+      const Coord l = brickLocal(i);
+      return x[l.x] + y[l.y] + z[l.z];
+    }
+  };
+  const AxisTables from_center(brick.origin, scale, center);
+  int ref = -1;
+  uint32_t brick_part = 0, last = kNoSite;
+  double ref_to_center = std::numeric_limits<double>::infinity();
+  float farthest_value = 0;
   Vec3d normal{};
   for (int w = 0; w < kBrickVoxels / 64; ++w)
     for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
       const int i = w * 64 + std::countr_zero(bits);
       if (sites[i] == kNoSite) return false;
-      farthest = std::max(farthest, double(std::abs(brick.values[i])) / voxel_size);
+      farthest_value = std::max(farthest_value, std::abs(brick.values[i]));
       const uint32_t t = triangleOf(sites[i]);
-      const Vec3d tn{face_n[t].x, face_n[t].y, face_n[t].z};
-      if (n++ == 0) normal = tn, brick_part = part.empty() ? 0 : part[t];
-      if (normal.dot(tn) <= 0) return false;                     // thin parts: opposite sheets in one brick
-      if (!part.empty() && part[t] != brick_part) return false;  // sheets of two parts
-      const double c2 = (at(i) - center).lengthSqr();
+      if (t != last) {  // neighbouring voxels mostly share their closest triangle
+        const Vec3d tn{face_n[t].x, face_n[t].y, face_n[t].z};
+        if (last == kNoSite) normal = tn, brick_part = part.empty() ? 0 : part[t];
+        if (normal.dot(tn) <= 0) return false;                     // thin parts: opposite sheets in one brick
+        if (!part.empty() && part[t] != brick_part) return false;  // sheets of two parts
+        last = t;
+      }
+      const double c2 = from_center.distance2(i);
       if (c2 < ref_to_center) ref_to_center = c2, ref = i;
     }
   if (ref < 0) return false;
+  const double farthest = double(farthest_value) / voxel_size;
   // Every point of the subset's box is at least this far from the boundary curves. Farther than every voxel's
   // distance to the surface, no voxel's closest point lies on a boundary edge, where "behind the pseudonormal" need not
   // mean across the sheet (beyond a rim, behind the face's plane, the winding number has not jumped).
   const double boundary = boundaryDistance(near, center, radius);
   if (boundary <= farthest) return false;
   double spread2 = 0;  // the farthest voxel from the reference
+  const AxisTables from_ref(brick.origin, scale, at(ref));
   for (int w = 0; w < kBrickVoxels / 64; ++w)
     for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1)
-      spread2 = std::max(spread2, (at(w * 64 + std::countr_zero(bits)) - at(ref)).lengthSqr());
+      spread2 = std::max(spread2, from_ref.distance2(w * 64 + std::countr_zero(bits)));
   // Off the sheets the winding number turns around a straight boundary edge like theta / (2 pi): by at most
   // spread / (2 pi boundary) over the brick; twice that for curved and several curves.
   const double drift = std::sqrt(spread2) / (std::numbers::pi * boundary);
@@ -559,13 +669,7 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   const auto agrees = [&](double w, double w_error) { return std::abs(w - behind) + drift + w_error < 0.5; };
   double error = 0;
   if (!agrees(windingUntil(at(ref), agrees, &error), error)) return false;
-  for (int w = 0; w < kBrickVoxels / 64; ++w)
-    for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
-      const int i = w * 64 + std::countr_zero(bits);
-      if (i == ref ? ref_behind
-                   : insidePseudonormal(at(i), triangleOf(sites[i]), std::abs(brick.values[i]) / voxel_size))
-        brick.values[i] = -std::abs(brick.values[i]);
-    }
+  signByPseudonormal(brick, subset, sites, site_triangle, voxel_size, scale);
   return true;
 }
 
@@ -686,25 +790,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
         });
       return {brick.mask.count(), 0, 0, 0};
     }
-    uint32_t last = kNoSite;
-    Vec3d n{}, v0{};
-    forEachDelivered([&](int i) {
-      if (sites[i] == kNoSite) return true;
-      const uint32_t t = triangleOf(sites[i]);
-      if (t != last) {
-        n = {double(s.face_n[t].x), double(s.face_n[t].y), double(s.face_n[t].z)};
-        v0 = s.verts[s.corners[t][0]];
-        last = t;
-      }
-      const Vec3d p = unitsOf(brick.origin + brickLocal(i));
-      const double dist = std::abs(brick.values[i]) / voxel_size;
-      // insidePseudonormal, with the plane kept (the same arithmetic as Normal3f::dot).
-      const Vec3d q = p - v0;
-      const double plane = n.x * q.x + n.y * q.y + n.z * q.z;
-      const bool in = planeDecides(plane, dist) ? plane < 0 : s.insideByClosestFeature(p, t);
-      if (in) brick.values[i] = -std::abs(brick.values[i]);
-      return true;
-    });
+    s.signByPseudonormal(brick, brick.mask, sites, site_triangle, voxel_size, scale);
     return {brick.mask.count(), 0, 0, 0};
   }
   BrickMask todo = brick.mask;  // the voxels still to sign
