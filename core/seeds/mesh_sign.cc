@@ -205,6 +205,9 @@ constexpr double kOnSheetTie = 1e-9;
 bool insideByWinding(double w) { return w > 0.5 + kOnSheetTie; }
 // Voxels nearer the surface than this (voxels) lie on it, up to the distance's rounding.
 constexpr double kOnSheet = 1e-6;
+// A winding voxel's ball (signBrick) reaches its distance to the surface less this (voxels): five times the band's
+// largest distance error measured against brute force.
+constexpr double kWindingBallMargin = 0.5;
 // The boundary fans' tier (MeshSign::Tables::fans) reads their winding number with the finest query: its value is as
 // good as that query's.
 constexpr double kFanTierError = kWindingQueryError;
@@ -832,10 +835,10 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     if (!todo.empty()) brick_boundary = s.boundaryDistance(near, brick_center, brick_radius);
   }
   // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
-  // surface. A voxel's distance to the surface is a ball around it that no surface crosses: parity is constant there,
-  // so a later voxel inside the ball (less a voxel of margin) takes its sign without a query. The winding number also
-  // turns around the boundary curves inside such a ball, so it keeps its side of 1/2 only as far as its distance from
-  // 1/2 (less the query's error) covers that turn.
+  // surface. A voxel's distance to the surface is a ball around it that no surface crosses: a closed mesh's parity is
+  // constant there, so a later voxel inside the ball (less a margin) takes its sign without a query. The winding number
+  // also turns around the boundary curves inside such a ball, so it keeps its side of 1/2 only as far as its distance
+  // from 1/2 (less the query's error) covers that turn.
   struct Ball {
     Vec3d c;
     double r2;
@@ -843,9 +846,19 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     double slack;  // winding: |w - 1/2| at c less the query's error
     double drift;  // winding: the turn per unit of distance from c
   };
+  // Winding: the voxels farthest from the surface first, whose balls reach farthest; a ball reaches its distance
+  // less kWindingBallMargin (the band's distances are within a tenth of a voxel of the exact ones). Parity keeps index
+  // order and a voxel of margin: on an open mesh ray parity is not constant off the surface (a ray's line sweeping
+  // over a boundary edge changes it), so its values there depend on the order, and these are its recorded ones.
   std::vector<Ball> balls;
-  for (int i = 0; i < kBrickVoxels; ++i) {
-    if (!todo.test(i)) continue;
+  std::vector<int> order;
+  for (int i = 0; i < kBrickVoxels; ++i)
+    if (todo.test(i)) order.push_back(i);
+  if (method_ == SignMethod::kWinding)
+    std::stable_sort(order.begin(), order.end(),
+                     [&](int a, int b) { return std::abs(brick.values[a]) > std::abs(brick.values[b]); });
+  const double ball_margin = method_ == SignMethod::kWinding ? kWindingBallMargin : 1.0;
+  for (int i : order) {
     const Vec3d p = unitsOf(brick.origin + brickLocal(i));
     bool in = false;
     bool found = false;
@@ -858,7 +871,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     }
     if (!found) {
       const double dist = std::abs(brick.values[i]) / voxel_size;
-      const double r = dist - 1.0;
+      const double r = dist - ball_margin;
       if (method_ == SignMethod::kWinding && dist < kOnSheet) {
         // On a sheet the winding number is its two sides' mean, which the tiers read only to within their error (the
         // fans' tier gets one side's value or the other's): the sign of a zero distance goes outside, as ties do.
