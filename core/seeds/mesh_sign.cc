@@ -359,9 +359,15 @@ struct MeshSign::Tables {
   }
   /// Signs the voxels of `subset` (delivered voxels of the brick, all within `radius` frame units of `center`) with
   /// one winding query when that provably agrees with the exact winding number (below); false, nothing signed, else.
+  /// `known` holds the brick's voxels already queried, with the value and its error bound: a reference found there
+  /// is not queried again, and one queried is added (a refused certificate's value signs its reference later).
+  struct KnownWinding {
+    int voxel;
+    double w, error;
+  };
   bool signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
                             const NearBoundary& near, const uint32_t* sites, const uint32_t* site_triangle,
-                            double voxel_size, const Vec3d& scale) const;
+                            double voxel_size, const Vec3d& scale, std::vector<KnownWinding>* known) const;
 };
 
 void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
@@ -603,8 +609,8 @@ void MeshSign::Tables::signByPseudonormal(Brick& brick, const BrickMask& subset,
 // sheets of the same orientation, within a brick.
 bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
                                             const NearBoundary& near, const uint32_t* sites,
-                                            const uint32_t* site_triangle, double voxel_size,
-                                            const Vec3d& scale) const {
+                                            const uint32_t* site_triangle, double voxel_size, const Vec3d& scale,
+                                            std::vector<KnownWinding>* known) const {
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
   const auto at = [&](int i) {
     const Coord c = brick.origin + brickLocal(i);
@@ -670,8 +676,15 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   // pseudonormal there as much as of w0.
   const double behind = ref_behind ? 1.0 : 0.0;
   const auto agrees = [&](double w, double w_error) { return std::abs(w - behind) + drift + w_error < 0.5; };
-  double error = 0;
-  if (!agrees(windingUntil(at(ref), agrees, &error), error)) return false;
+  const auto it = std::find_if(known->begin(), known->end(), [ref](const KnownWinding& k) { return k.voxel == ref; });
+  double w, error = 0;
+  if (it != known->end()) {
+    w = it->w, error = it->error;
+  } else {
+    w = windingUntil(at(ref), agrees, &error);
+    known->push_back({ref, w, error});
+  }
+  if (!agrees(w, error)) return false;
   signByPseudonormal(brick, subset, sites, site_triangle, voxel_size, scale);
   return true;
 }
@@ -801,6 +814,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   // Winding: every voxel of the brick (and the path between two of them) is at least this far from the boundary.
   double brick_boundary = 0;
   Tables::NearBoundary near;  // winding: the boundary pieces near the brick
+  std::vector<Tables::KnownWinding> known;  // winding: the voxels the certificates queried
   if (method_ == SignMethod::kWinding) {
     auto boxCenter = [&](const Coord& lo, double half) {  // of the voxels lo .. lo + 2 half, in frame units
       return Vec3d{(lo.x + half) * scale.x, (lo.y + half) * scale.y, (lo.z + half) * scale.z};
@@ -809,7 +823,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     const double brick_radius = 3.5 * std::sqrt(scale.lengthSqr());
     s.findNearBoundary(brick_center, brick_radius, &near);
     if (s.signWindingCertified(brick, brick.mask, brick_center, brick_radius, near, sites, site_triangle, voxel_size,
-                               scale))
+                               scale, &known))
       return {0, brick.mask.count(), 0, 0};
     // Refused whole (near a hole, a sharp edge, where parts meet): each 4^3 octant on its own, with half the spread
     // and, nearer the boundary, half the box, then each 2^3 cell of what is left, before any voxel takes a query of
@@ -824,7 +838,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
         const int i = int(k);
         const Coord lo{edge * (i % per_axis), edge * (i / per_axis % per_axis), edge * (i / (per_axis * per_axis))};
         if (!s.signWindingCertified(brick, box, boxCenter(brick.origin + lo, half), half * std::sqrt(scale.lengthSqr()),
-                                    near, sites, site_triangle, voxel_size, scale))
+                                    near, sites, site_triangle, voxel_size, scale, &known))
           continue;
         certified += box.count();
         for (int w = 0; w < kBrickVoxels / 64; ++w) todo.words[w] &= ~box.words[w];
@@ -850,6 +864,8 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   // less kWindingBallMargin (the band's distances are within a tenth of a voxel of the exact ones). Parity keeps index
   // order and a voxel of margin: on an open mesh ray parity is not constant off the surface (a ray's line sweeping
   // over a boundary edge changes it), so its values there depend on the order, and these are its recorded ones.
+  BrickMask queried;  // the voxels in `known`
+  for (const Tables::KnownWinding& k : known) queried.set(k.voxel);
   std::vector<Ball> balls;
   std::vector<int> order;
   for (int i = 0; i < kBrickVoxels; ++i)
@@ -878,7 +894,13 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
         in = false;
       } else if (method_ == SignMethod::kWinding) {
         double error;
-        const double w = s.windingAt(p, &error);
+        // A certificate's value decides here when far enough from 1/2, else the voxel takes its own query.
+        const auto it = queried.test(i) ? std::find_if(known.begin(), known.end(),
+                                                       [i](const Tables::KnownWinding& k) { return k.voxel == i; })
+                                        : known.end();
+        const bool decided = it != known.end() && std::abs(it->w - 0.5) > it->error;
+        const double w = decided ? it->w : s.windingAt(p, &error);
+        if (decided) error = it->error;
         in = insideByWinding(w);
         // The path from the ball's centre to a voxel it signs lies in the brick and in the ball.
         const double boundary =
