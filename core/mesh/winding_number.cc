@@ -127,32 +127,19 @@ void WindingNumber::build(uint32_t begin, uint32_t end, uint32_t id) {
   if (end - begin >= 4096 && isInterrupted(interrupter_)) return;
   Node n{};
   n.begin = begin, n.end = end;
-  double total = 0;
   const auto tri = [&](uint32_t i) -> const std::array<Vec3d, 3>& { return tris_[ids_[i]]; };
-  Vec3d weighted{}, lo = centroids_[ids_[begin]], hi = lo;
+  Vec3d lo = centroids_[ids_[begin]], hi = lo;
   for (uint32_t i = begin; i < end; ++i) {
-    const auto& t = tri(i);
-    const Vec3d av = (t[1] - t[0]).cross(t[2] - t[0]) * 0.5;
-    const double a = av.length();
-    const Vec3d c = centroids_[ids_[i]];
-    n.area = n.area + av;
-    n.abs_area += a;
-    weighted = weighted + c * a;
-    total += a;
+    const Vec3d& c = centroids_[ids_[i]];
     lo = {std::min(lo.x, c.x), std::min(lo.y, c.y), std::min(lo.z, c.z)};
     hi = {std::max(hi.x, c.x), std::max(hi.y, c.y), std::max(hi.z, c.z)};
   }
-  n.center = total > 0 ? weighted * (1.0 / total) : (lo + hi) * 0.5;
   std::array<double, 9> moment{};
-  for (uint32_t i = begin; i < end; ++i) {
-    const auto& t = tri(i);
-    for (const Vec3d& v : t) n.radius2 = std::max(n.radius2, (v - n.center).lengthSqr());
-    const Vec3d av = (t[1] - t[0]).cross(t[2] - t[0]) * 0.5, d = centroids_[ids_[i]] - n.center;
-    const double a[3] = {av.x, av.y, av.z}, e[3] = {d.x, d.y, d.z};
+  const auto addMoment = [&](const Vec3d& area, const Vec3d& offset) {  // area (x) offset
+    const double a[3] = {area.x, area.y, area.z}, e[3] = {offset.x, offset.y, offset.z};
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c) moment[3 * r + c] += a[r] * e[c];
-  }
-  for (int k = 0; k < 9; ++k) n.moment[k] = float(moment[k]);
+  };
   if (end - begin > kLeafSize) {
     const Vec3d e = hi - lo;
     const int axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
@@ -172,7 +159,37 @@ void WindingNumber::build(uint32_t begin, uint32_t end, uint32_t id) {
       tbb::parallel_invoke(left, right);
     else
       left(), right();
+    if (end - begin >= 4096 && isInterrupted(interrupter_)) return;  // a child may have stopped early (sticky)
+    // The sums from the children's (each triangle is read once a level for the bounds and the radius only): the
+    // moment about this center is the children's about theirs plus their area vectors times the shift.
+    const Node& l = nodes_[n.left];
+    const Node& r = nodes_[n.right];
+    n.area = l.area + r.area;
+    n.abs_area = l.abs_area + r.abs_area;
+    n.center = n.abs_area > 0 ? (l.center * l.abs_area + r.center * r.abs_area) * (1.0 / n.abs_area) : (lo + hi) * 0.5;
+    for (const Node* child : {&l, &r}) {
+      for (int k = 0; k < 9; ++k) moment[k] += child->moment[k];
+      addMoment(child->area, child->center - n.center);
+    }
+  } else {
+    Vec3d weighted{};
+    for (uint32_t i = begin; i < end; ++i) {
+      const auto& t = tri(i);
+      const Vec3d av = (t[1] - t[0]).cross(t[2] - t[0]) * 0.5;
+      const double a = av.length();
+      n.area = n.area + av;
+      n.abs_area += a;
+      weighted = weighted + centroids_[ids_[i]] * a;
+    }
+    n.center = n.abs_area > 0 ? weighted * (1.0 / n.abs_area) : (lo + hi) * 0.5;
+    for (uint32_t i = begin; i < end; ++i) {
+      const auto& t = tri(i);
+      addMoment((t[1] - t[0]).cross(t[2] - t[0]) * 0.5, centroids_[ids_[i]] - n.center);
+    }
   }
+  for (int k = 0; k < 9; ++k) n.moment[k] = float(moment[k]);
+  for (uint32_t i = begin; i < end; ++i)
+    for (const Vec3d& v : tri(i)) n.radius2 = std::max(n.radius2, (v - n.center).lengthSqr());
   nodes_[id] = n;
 }
 
