@@ -357,17 +357,34 @@ struct MeshSign::Tables {
     }
     return w;
   }
+  /// The winding values a brick's certificates queried, by voxel, each with its error bound.
+  class KnownWindings {
+   public:
+    struct Value {
+      double w, error;
+    };
+    const Value* find(int voxel) const {
+      if (!voxels_.test(voxel)) return nullptr;
+      for (const auto& [v, value] : values_)
+        if (v == voxel) return &value;
+      return nullptr;
+    }
+    void add(int voxel, const Value& value) {
+      voxels_.set(voxel);
+      values_.push_back({voxel, value});
+    }
+
+   private:
+    BrickMask voxels_;  // those in values_
+    std::vector<std::pair<int, Value>> values_;
+  };
   /// Signs the voxels of `subset` (delivered voxels of the brick, all within `radius` frame units of `center`) with
   /// one winding query when that provably agrees with the exact winding number (below); false, nothing signed, else.
-  /// `known` holds the brick's voxels already queried, with the value and its error bound: a reference found there
-  /// is not queried again, and one queried is added (a refused certificate's value signs its reference later).
-  struct KnownWinding {
-    int voxel;
-    double w, error;
-  };
+  /// A reference in `known` is not queried again, and one queried is added (a refused certificate's value signs its
+  /// reference later).
   bool signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
                             const NearBoundary& near, const uint32_t* sites, const uint32_t* site_triangle,
-                            double voxel_size, const Vec3d& scale, std::vector<KnownWinding>* known) const;
+                            double voxel_size, const Vec3d& scale, KnownWindings* known) const;
 };
 
 void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
@@ -610,7 +627,7 @@ void MeshSign::Tables::signByPseudonormal(Brick& brick, const BrickMask& subset,
 bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
                                             const NearBoundary& near, const uint32_t* sites,
                                             const uint32_t* site_triangle, double voxel_size, const Vec3d& scale,
-                                            std::vector<KnownWinding>* known) const {
+                                            KnownWindings* known) const {
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
   const auto at = [&](int i) {
     const Coord c = brick.origin + brickLocal(i);
@@ -676,15 +693,14 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   // pseudonormal there as much as of w0.
   const double behind = ref_behind ? 1.0 : 0.0;
   const auto agrees = [&](double w, double w_error) { return std::abs(w - behind) + drift + w_error < 0.5; };
-  const auto it = std::find_if(known->begin(), known->end(), [ref](const KnownWinding& k) { return k.voxel == ref; });
-  double w, error = 0;
-  if (it != known->end()) {
-    w = it->w, error = it->error;
+  KnownWindings::Value value;
+  if (const KnownWindings::Value* found = known->find(ref)) {
+    value = *found;
   } else {
-    w = windingUntil(at(ref), agrees, &error);
-    known->push_back({ref, w, error});
+    value.w = windingUntil(at(ref), agrees, &value.error);
+    known->add(ref, value);
   }
-  if (!agrees(w, error)) return false;
+  if (!agrees(value.w, value.error)) return false;
   signByPseudonormal(brick, subset, sites, site_triangle, voxel_size, scale);
   return true;
 }
@@ -814,7 +830,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   // Winding: every voxel of the brick (and the path between two of them) is at least this far from the boundary.
   double brick_boundary = 0;
   Tables::NearBoundary near;  // winding: the boundary pieces near the brick
-  std::vector<Tables::KnownWinding> known;  // winding: the voxels the certificates queried
+  Tables::KnownWindings known;  // winding: the voxels the certificates queried
   if (method_ == SignMethod::kWinding) {
     auto boxCenter = [&](const Coord& lo, double half) {  // of the voxels lo .. lo + 2 half, in frame units
       return Vec3d{(lo.x + half) * scale.x, (lo.y + half) * scale.y, (lo.z + half) * scale.z};
@@ -864,8 +880,6 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   // less kWindingBallMargin (the band's distances are within a tenth of a voxel of the exact ones). Parity keeps index
   // order and a voxel of margin: on an open mesh ray parity is not constant off the surface (a ray's line sweeping
   // over a boundary edge changes it), so its values there depend on the order, and these are its recorded ones.
-  BrickMask queried;  // the voxels in `known`
-  for (const Tables::KnownWinding& k : known) queried.set(k.voxel);
   std::vector<Ball> balls;
   std::vector<int> order;
   for (int i = 0; i < kBrickVoxels; ++i)
@@ -895,12 +909,10 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
       } else if (method_ == SignMethod::kWinding) {
         double error;
         // A certificate's value decides here when far enough from 1/2, else the voxel takes its own query.
-        const auto it = queried.test(i) ? std::find_if(known.begin(), known.end(),
-                                                       [i](const Tables::KnownWinding& k) { return k.voxel == i; })
-                                        : known.end();
-        const bool decided = it != known.end() && std::abs(it->w - 0.5) > it->error;
-        const double w = decided ? it->w : s.windingAt(p, &error);
-        if (decided) error = it->error;
+        const Tables::KnownWindings::Value* found = known.find(i);
+        const bool decided = found && std::abs(found->w - 0.5) > found->error;
+        const double w = decided ? found->w : s.windingAt(p, &error);
+        if (decided) error = found->error;
         in = insideByWinding(w);
         // The path from the ball's centre to a voxel it signs lies in the brick and in the ball.
         const double boundary =
