@@ -618,7 +618,8 @@ void MeshSign::Tables::signByPseudonormal(Brick& brick, const BrickMask& subset,
 // varies smoothly along either side. So when a brick's voxels all have their closest triangle on one locally oriented
 // patch (no two closest triangles face apart) far from any boundary, one exact query at the voxel nearest the brick's
 // centre fixes w0: if w0 lies well inside (-1/2, 1/2), every voxel in front is outside and every voxel behind is
-// inside, the pseudonormal's answer. Otherwise (near holes, thin or self-intersecting parts, w0 near 1/2) the brick
+// inside, the pseudonormal's answer; well above 1/2 (the sheet inside another part's volume), every voxel is inside;
+// well below -1/2, every voxel is outside. Otherwise (near holes, thin parts, w0 near +-1/2) the brick
 // takes a winding query per voxel. The margins cover the turn of the winding number around the boundary curves
 // across the brick and the hierarchy's error. Sheets of two connected parts in one brick (parts that cross, or nest
 // with the same orientation: a voxel in front of one sheet can lie behind the other, which no single w0 describes)
@@ -689,18 +690,39 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   const double drift = std::sqrt(spread2) / (std::numbers::pi * boundary);
   if (drift + kWindingQueryError >= 0.5) return false;
   const bool ref_behind = insidePseudonormal(at(ref), triangleOf(sites[ref]), std::abs(brick.values[ref]) / voxel_size);
-  // The reference's value must lie within 1/2 of the side the pseudonormal gives it, less the drift: a check of the
-  // pseudonormal there as much as of w0.
-  const double behind = ref_behind ? 1.0 : 0.0;
-  const auto agrees = [&](double w, double w_error) { return std::abs(w - behind) + drift + w_error < 0.5; };
+  // The reference's value less its side's jump is w0, in front of the sheet: the voxels in front are inside when
+  // w0 > 1/2, those behind when w0 + 1 > 1/2. The reference's value decides once w0 lies, less the drift and its
+  // error, clear of both -1/2 and 1/2: mostly near 0 (the pseudonormal's answer), but also near 1 or -1, where another
+  // part's volume holds this sheet (a part inside another, crossing parts: every voxel inside) or an inverted one
+  // does (every voxel outside).
+  const double jump = ref_behind ? 1.0 : 0.0;
+  const auto decides = [&](double w, double w_error) {
+    const double w0 = w - jump, margin = drift + w_error;
+    return std::abs(w0 - 0.5) > margin && std::abs(w0 + 0.5) > margin;
+  };
   KnownWindings::Value value;
   if (const KnownWindings::Value* found = known->find(ref)) {
     value = *found;
   } else {
-    value.w = windingUntil(at(ref), agrees, &value.error);
+    value.w = windingUntil(at(ref), decides, &value.error);
     known->add(ref, value);
   }
-  if (!agrees(value.w, value.error)) return false;
+  if (!decides(value.w, value.error)) return false;
+  const double w0 = value.w - jump;
+  const bool front_inside = w0 > 0.5, behind_inside = w0 > -0.5;
+  if (front_inside == behind_inside) {  // one side of 1/2 throughout
+    // ... read off the sheet: on it the value is one side's or the other's, and the pseudonormal's side says
+    // nothing (w0 would be off by the jump). Voxels on a sheet take the outside, as in signBrick.
+    const double ref_distance = std::abs(brick.values[ref]) / voxel_size;
+    if (ref_distance < kOnSheet) return false;
+    if (front_inside)
+      for (int w = 0; w < kBrickVoxels / 64; ++w)
+        for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
+          const int i = w * 64 + std::countr_zero(bits);
+          if (std::abs(brick.values[i]) >= kOnSheet * voxel_size) brick.values[i] = -std::abs(brick.values[i]);
+        }
+    return true;
+  }
   signByPseudonormal(brick, subset, sites, site_triangle, voxel_size, scale);
   return true;
 }

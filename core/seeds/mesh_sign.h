@@ -16,8 +16,9 @@
 //     distance to it, both in the frame (only kPseudonormal reads them: needsClosestTriangle()).
 //   * signBrick() is the grid's batched form of the same test: it negates the values of a brick's delivered voxels
 //     that lie inside, saving most tests (a voxel far from the surface signs its whole brick; for winding, one exact
-//     query signs a brick, or else each 4^3 octant, then each 2^3 cell, where the pseudonormal provably agrees with
-//     it — docs/algorithm.md §10; for winding and parity a voxel at distance d decides the voxels within d - 1 of it).
+//     query signs a brick, or else each 4^3 octant, then each 2^3 cell, where its value and the pseudonormal's side
+//     provably fix every voxel's — docs/algorithm.md §10; for winding and parity a voxel at distance d decides the
+//     voxels within d - 1 of it).
 // Immutable once built; every query is thread-safe.
 #pragma once
 

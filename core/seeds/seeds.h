@@ -42,7 +42,7 @@ enum class SiteKind { kPoint, kTriangle };
 /// it (core/seeds/mesh_sign.h).
 struct SignShares {
   int64_t pseudonormal = 0;       ///< the pseudonormal test
-  int64_t winding_certified = 0;  ///< the winding number, one query a brick where the pseudonormal provably agrees
+  int64_t winding_certified = 0;  ///< the winding number, one query a brick where it provably fixes every voxel's sign
   int64_t winding_per_voxel = 0;  ///< the winding number, per voxel (a query, or inside a queried voxel's safe ball)
   int64_t parity = 0;             ///< ray parity
   int64_t total() const { return pseudonormal + winding_certified + winding_per_voxel + parity; }

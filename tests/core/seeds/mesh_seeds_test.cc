@@ -405,8 +405,8 @@ TriangleMesh soupOf(const TriangleMesh& mesh) {
   return soup;
 }
 
-// The winding sign (per brick certified by one query where the pseudonormal provably agrees, else per voxel, with
-// cached balls) against the exact generalized winding number of tests/support/brute_mesh, on every delivered voxel
+// The winding sign (per brick certified by one query where its value provably fixes every voxel's side, else per voxel,
+// with cached balls) against the exact generalized winding number of tests/support/brute_mesh, on every delivered voxel
 // where that number is decided (|w - 1/2| > 0.05): open meshes with holes near the band, a soup, paper mode. The
 // hierarchy's old far field without error control and an unbounded ball cache got 0.05 % of these wrong on the
 // bunny with holes at 64^3 (23 voxels).
