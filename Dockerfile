@@ -58,8 +58,10 @@ RUN /usr/local/lib/distband/install-runtime-deps server \
  && rm -rf /var/lib/apt/lists/* /var/cache/apt/*.bin /var/cache/debconf/*-old /var/lib/dpkg/*-old \
            /var/log/apt /var/log/dpkg.log
 COPY --from=build /out/distband-server /out/distband-health /usr/local/bin/
-# Fail the image build if the runtime package list misses a library the binaries load.
+# Fail the image build if the runtime package list misses a library the binaries load (Embree is loaded by name
+# when a parity sign first needs it: not in ldd's list, so looked up in the loader's cache).
 RUN if ldd /usr/local/bin/distband-server /usr/local/bin/distband-health | grep "not found"; then exit 1; fi \
+ && ldconfig -p | grep -q "libembree3.so.3 " \
  && distband-server --version && distband-health --help >/dev/null
 # A fixed numeric uid/gid so Kubernetes' runAsNonRoot can verify it without reading /etc/passwd.
 RUN groupadd --system --gid 10001 distband \

@@ -9,9 +9,11 @@
 #include <span>
 #include <stdexcept>
 #include <tuple>
+#include <type_traits>
 #include <unordered_map>
 #include <utility>
 
+#include <dlfcn.h>
 #include <embree3/rtcore.h>
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
@@ -86,24 +88,68 @@ Vec3d normalized(const Vec3d& v) {
   return l > 0 ? v * (1.0 / l) : Vec3d{};
 }
 
+// Embree's entry points, loaded when the first parity scene is built: linked, the library's relocations cost every
+// process ~6 ms of start-up (a trivial program: 2 -> 8 ms), which every run paid and only parity signs use.
+struct EmbreeLibrary {
+  decltype(&rtcNewDevice) newDevice = nullptr;
+  decltype(&rtcReleaseDevice) releaseDevice = nullptr;
+  decltype(&rtcNewScene) newScene = nullptr;
+  decltype(&rtcReleaseScene) releaseScene = nullptr;
+  decltype(&rtcSetSceneFlags) setSceneFlags = nullptr;
+  decltype(&rtcSetSceneProgressMonitorFunction) setSceneProgressMonitorFunction = nullptr;
+  decltype(&rtcNewGeometry) newGeometry = nullptr;
+  decltype(&rtcSetNewGeometryBuffer) setNewGeometryBuffer = nullptr;
+  decltype(&rtcCommitGeometry) commitGeometry = nullptr;
+  decltype(&rtcAttachGeometry) attachGeometry = nullptr;
+  decltype(&rtcReleaseGeometry) releaseGeometry = nullptr;
+  decltype(&rtcCommitScene) commitScene = nullptr;
+  decltype(&rtcIntersect1) intersect1 = nullptr;
+  bool loaded = false;  // every entry point found
+
+  /// The process's one copy (the library stays loaded): `loaded` is false when it is not installed.
+  static const EmbreeLibrary& get() {
+    static const EmbreeLibrary library = [] {
+      EmbreeLibrary l;
+      void* handle = dlopen("libembree3.so.3", RTLD_NOW | RTLD_LOCAL);
+      if (!handle) return l;
+      const auto find = [handle](auto* entry, const char* name) {
+        *entry = reinterpret_cast<std::remove_pointer_t<decltype(entry)>>(dlsym(handle, name));
+        return *entry != nullptr;
+      };
+      l.loaded = find(&l.newDevice, "rtcNewDevice") && find(&l.releaseDevice, "rtcReleaseDevice") &&
+                 find(&l.newScene, "rtcNewScene") && find(&l.releaseScene, "rtcReleaseScene") &&
+                 find(&l.setSceneFlags, "rtcSetSceneFlags") &&
+                 find(&l.setSceneProgressMonitorFunction, "rtcSetSceneProgressMonitorFunction") &&
+                 find(&l.newGeometry, "rtcNewGeometry") && find(&l.setNewGeometryBuffer, "rtcSetNewGeometryBuffer") &&
+                 find(&l.commitGeometry, "rtcCommitGeometry") && find(&l.attachGeometry, "rtcAttachGeometry") &&
+                 find(&l.releaseGeometry, "rtcReleaseGeometry") && find(&l.commitScene, "rtcCommitScene") &&
+                 find(&l.intersect1, "rtcIntersect1");
+      return l;
+    }();
+    return library;
+  }
+};
+
 // Embree scene for ray parity; owns the device and scene for as long as a sign refers to it.
 class ParityScene {
  public:
-  ParityScene(const std::vector<std::array<Vec3d, 3>>& tris, const Interrupter* interrupter) {
-    device_ = rtcNewDevice(nullptr);
+  ParityScene(const std::vector<std::array<Vec3d, 3>>& tris, const Interrupter* interrupter)
+      : embree_(EmbreeLibrary::get()) {
+    if (!embree_.loaded) return;
+    device_ = embree_.newDevice(nullptr);
     if (!device_) return;
-    scene_ = rtcNewScene(device_);
-    rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    scene_ = embree_.newScene(device_);
+    embree_.setSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
     // Embree calls this while it builds the BVH; returning false cancels the build.
     if (interrupter)
-      rtcSetSceneProgressMonitorFunction(
+      embree_.setSceneProgressMonitorFunction(
           scene_, [](void* ptr, double) { return !static_cast<const Interrupter*>(ptr)->interrupted(); },
           const_cast<Interrupter*>(interrupter));
-    RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* v = static_cast<float*>(
-        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), tris.size() * 3));
-    auto* idx = static_cast<unsigned*>(
-        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), tris.size()));
+    RTCGeometry geom = embree_.newGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* v = static_cast<float*>(embree_.setNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                               3 * sizeof(float), tris.size() * 3));
+    auto* idx = static_cast<unsigned*>(embree_.setNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                    3 * sizeof(unsigned), tris.size()));
     for (size_t t = 0; t < tris.size(); ++t)
       for (int k = 0; k < 3; ++k) {
         v[9 * t + 3 * k + 0] = float(tris[t][k].x);
@@ -111,14 +157,14 @@ class ParityScene {
         v[9 * t + 3 * k + 2] = float(tris[t][k].z);
         idx[3 * t + k] = unsigned(3 * t + k);
       }
-    rtcCommitGeometry(geom);
-    rtcAttachGeometry(scene_, geom);
-    rtcReleaseGeometry(geom);
-    rtcCommitScene(scene_);
+    embree_.commitGeometry(geom);
+    embree_.attachGeometry(scene_, geom);
+    embree_.releaseGeometry(geom);
+    embree_.commitScene(scene_);
   }
   ~ParityScene() {
-    if (scene_) rtcReleaseScene(scene_);
-    if (device_) rtcReleaseDevice(device_);
+    if (scene_) embree_.releaseScene(scene_);
+    if (device_) embree_.releaseDevice(device_);
   }
   ParityScene(const ParityScene&) = delete;
   ParityScene& operator=(const ParityScene&) = delete;
@@ -147,7 +193,7 @@ class ParityScene {
       rh.ray.tfar = std::numeric_limits<float>::infinity();
       rh.ray.mask = ~0u;
       rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-      rtcIntersect1(scene_, &ctx, &rh);
+      embree_.intersect1(scene_, &ctx, &rh);
       if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;
       ++count;
       // Step past this hit; hits at the same distance (a shared edge or corner) count once.
@@ -156,6 +202,7 @@ class ParityScene {
     return count;
   }
   RTCDevice device_ = nullptr;
+  const EmbreeLibrary& embree_;
   RTCScene scene_ = nullptr;
 };
 
@@ -793,7 +840,9 @@ Status MeshSign::build(std::shared_ptr<const std::vector<Vec3d>> vertices,
     } else {
       tables.parity = std::make_unique<ParityScene>(tris, interrupter);
       if (!isInterrupted(interrupter) && !tables.parity->ok())
-        return Status::Internal("cannot create the Embree device for parity signs");
+        return Status::Internal(EmbreeLibrary::get().loaded
+                                    ? "cannot create the Embree device for parity signs"
+                                    : "parity signs need Embree (libembree3.so.3), which could not be loaded");
     }
   }
   if (isInterrupted(interrupter)) return interrupter->status();
