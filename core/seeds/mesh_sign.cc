@@ -89,21 +89,28 @@ Vec3d normalized(const Vec3d& v) {
 }
 
 // Embree's entry points, loaded when the first parity scene is built: linked, the library's relocations cost every
-// process ~6 ms of start-up (a trivial program: 2 -> 8 ms), which every run paid and only parity signs use.
+// process ~6 ms of start-up (a trivial program: 2 -> 8 ms), which every run paid and only parity signs use. Each is
+// named once, below: a member of EmbreeLibrary and the symbol it is found by.
+// clang-format off
+#define DISTBAND_EMBREE_ENTRY_POINTS(X) \
+  X(rtcNewDevice) \
+  X(rtcReleaseDevice) \
+  X(rtcNewScene) \
+  X(rtcReleaseScene) \
+  X(rtcSetSceneFlags) \
+  X(rtcSetSceneProgressMonitorFunction) \
+  X(rtcNewGeometry) \
+  X(rtcSetNewGeometryBuffer) \
+  X(rtcCommitGeometry) \
+  X(rtcAttachGeometry) \
+  X(rtcReleaseGeometry) \
+  X(rtcCommitScene) \
+  X(rtcIntersect1)
+// clang-format on
 struct EmbreeLibrary {
-  decltype(&rtcNewDevice) newDevice = nullptr;
-  decltype(&rtcReleaseDevice) releaseDevice = nullptr;
-  decltype(&rtcNewScene) newScene = nullptr;
-  decltype(&rtcReleaseScene) releaseScene = nullptr;
-  decltype(&rtcSetSceneFlags) setSceneFlags = nullptr;
-  decltype(&rtcSetSceneProgressMonitorFunction) setSceneProgressMonitorFunction = nullptr;
-  decltype(&rtcNewGeometry) newGeometry = nullptr;
-  decltype(&rtcSetNewGeometryBuffer) setNewGeometryBuffer = nullptr;
-  decltype(&rtcCommitGeometry) commitGeometry = nullptr;
-  decltype(&rtcAttachGeometry) attachGeometry = nullptr;
-  decltype(&rtcReleaseGeometry) releaseGeometry = nullptr;
-  decltype(&rtcCommitScene) commitScene = nullptr;
-  decltype(&rtcIntersect1) intersect1 = nullptr;
+#define DISTBAND_EMBREE_DECLARE(name) decltype(&::name) name = nullptr;
+  DISTBAND_EMBREE_ENTRY_POINTS(DISTBAND_EMBREE_DECLARE)
+#undef DISTBAND_EMBREE_DECLARE
   bool loaded = false;  // every entry point found
 
   /// The process's one copy (the library stays loaded): `loaded` is false when it is not installed.
@@ -116,19 +123,15 @@ struct EmbreeLibrary {
         *entry = reinterpret_cast<std::remove_pointer_t<decltype(entry)>>(dlsym(handle, name));
         return *entry != nullptr;
       };
-      l.loaded = find(&l.newDevice, "rtcNewDevice") && find(&l.releaseDevice, "rtcReleaseDevice") &&
-                 find(&l.newScene, "rtcNewScene") && find(&l.releaseScene, "rtcReleaseScene") &&
-                 find(&l.setSceneFlags, "rtcSetSceneFlags") &&
-                 find(&l.setSceneProgressMonitorFunction, "rtcSetSceneProgressMonitorFunction") &&
-                 find(&l.newGeometry, "rtcNewGeometry") && find(&l.setNewGeometryBuffer, "rtcSetNewGeometryBuffer") &&
-                 find(&l.commitGeometry, "rtcCommitGeometry") && find(&l.attachGeometry, "rtcAttachGeometry") &&
-                 find(&l.releaseGeometry, "rtcReleaseGeometry") && find(&l.commitScene, "rtcCommitScene") &&
-                 find(&l.intersect1, "rtcIntersect1");
+#define DISTBAND_EMBREE_FIND(name) &&find(&l.name, #name)
+      l.loaded = true DISTBAND_EMBREE_ENTRY_POINTS(DISTBAND_EMBREE_FIND);
+#undef DISTBAND_EMBREE_FIND
       return l;
     }();
     return library;
   }
 };
+#undef DISTBAND_EMBREE_ENTRY_POINTS
 
 // Embree scene for ray parity; owns the device and scene for as long as a sign refers to it.
 class ParityScene {
@@ -136,20 +139,20 @@ class ParityScene {
   ParityScene(const std::vector<std::array<Vec3d, 3>>& tris, const Interrupter* interrupter)
       : embree_(EmbreeLibrary::get()) {
     if (!embree_.loaded) return;
-    device_ = embree_.newDevice(nullptr);
+    device_ = embree_.rtcNewDevice(nullptr);
     if (!device_) return;
-    scene_ = embree_.newScene(device_);
-    embree_.setSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    scene_ = embree_.rtcNewScene(device_);
+    embree_.rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
     // Embree calls this while it builds the BVH; returning false cancels the build.
     if (interrupter)
-      embree_.setSceneProgressMonitorFunction(
+      embree_.rtcSetSceneProgressMonitorFunction(
           scene_, [](void* ptr, double) { return !static_cast<const Interrupter*>(ptr)->interrupted(); },
           const_cast<Interrupter*>(interrupter));
-    RTCGeometry geom = embree_.newGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* v = static_cast<float*>(embree_.setNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                               3 * sizeof(float), tris.size() * 3));
-    auto* idx = static_cast<unsigned*>(embree_.setNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                                    3 * sizeof(unsigned), tris.size()));
+    RTCGeometry geom = embree_.rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* v = static_cast<float*>(embree_.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                                  3 * sizeof(float), tris.size() * 3));
+    auto* idx = static_cast<unsigned*>(embree_.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                       3 * sizeof(unsigned), tris.size()));
     for (size_t t = 0; t < tris.size(); ++t)
       for (int k = 0; k < 3; ++k) {
         v[9 * t + 3 * k + 0] = float(tris[t][k].x);
@@ -157,14 +160,14 @@ class ParityScene {
         v[9 * t + 3 * k + 2] = float(tris[t][k].z);
         idx[3 * t + k] = unsigned(3 * t + k);
       }
-    embree_.commitGeometry(geom);
-    embree_.attachGeometry(scene_, geom);
-    embree_.releaseGeometry(geom);
-    embree_.commitScene(scene_);
+    embree_.rtcCommitGeometry(geom);
+    embree_.rtcAttachGeometry(scene_, geom);
+    embree_.rtcReleaseGeometry(geom);
+    embree_.rtcCommitScene(scene_);
   }
   ~ParityScene() {
-    if (scene_) embree_.releaseScene(scene_);
-    if (device_) embree_.releaseDevice(device_);
+    if (scene_) embree_.rtcReleaseScene(scene_);
+    if (device_) embree_.rtcReleaseDevice(device_);
   }
   ParityScene(const ParityScene&) = delete;
   ParityScene& operator=(const ParityScene&) = delete;
@@ -193,7 +196,7 @@ class ParityScene {
       rh.ray.tfar = std::numeric_limits<float>::infinity();
       rh.ray.mask = ~0u;
       rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-      embree_.intersect1(scene_, &ctx, &rh);
+      embree_.rtcIntersect1(scene_, &ctx, &rh);
       if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;
       ++count;
       // Step past this hit; hits at the same distance (a shared edge or corner) count once.
@@ -201,8 +204,8 @@ class ParityScene {
     }
     return count;
   }
-  RTCDevice device_ = nullptr;
   const EmbreeLibrary& embree_;
+  RTCDevice device_ = nullptr;
   RTCScene scene_ = nullptr;
 };
 
@@ -252,6 +255,8 @@ constexpr double kOnSheetTie = 1e-9;
 bool insideByWinding(double w) { return w > 0.5 + kOnSheetTie; }
 // Voxels nearer the surface than this (voxels) lie on it, up to the distance's rounding.
 constexpr double kOnSheet = 1e-6;
+/// Whether a voxel this far from the surface (voxels) lies on it.
+bool onSheet(double distance) { return distance < kOnSheet; }
 // A winding voxel's ball (signBrick) reaches its distance to the surface less this (voxels): five times the band's
 // largest distance error measured against brute force.
 constexpr double kWindingBallMargin = 0.5;
@@ -760,13 +765,12 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   if (front_inside == behind_inside) {  // one side of 1/2 throughout
     // ... read off the sheet: on it the value is one side's or the other's, and the pseudonormal's side says
     // nothing (w0 would be off by the jump). Voxels on a sheet take the outside, as in signBrick.
-    const double ref_distance = std::abs(brick.values[ref]) / voxel_size;
-    if (ref_distance < kOnSheet) return false;
+    if (onSheet(std::abs(brick.values[ref]) / voxel_size)) return false;
     if (front_inside)
       for (int w = 0; w < kBrickVoxels / 64; ++w)
         for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
           const int i = w * 64 + std::countr_zero(bits);
-          if (std::abs(brick.values[i]) >= kOnSheet * voxel_size) brick.values[i] = -std::abs(brick.values[i]);
+          if (!onSheet(std::abs(brick.values[i]) / voxel_size)) brick.values[i] = -std::abs(brick.values[i]);
         }
     return true;
   }
@@ -973,7 +977,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     if (!found) {
       const double dist = std::abs(brick.values[i]) / voxel_size;
       const double r = dist - ball_margin;
-      if (method_ == SignMethod::kWinding && dist < kOnSheet) {
+      if (method_ == SignMethod::kWinding && onSheet(dist)) {
         // On a sheet the winding number is its two sides' mean, which the tiers read only to within their error (the
         // fans' tier gets one side's value or the other's): the sign of a zero distance goes outside, as ties do.
         in = false;
