@@ -9,6 +9,7 @@
 #include <array>
 #include <bit>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "core/grid.h"
@@ -32,6 +33,21 @@ struct BrickMask {
   bool empty() const {
     for (uint64_t w : words)
       if (w) return false;
+    return true;
+  }
+  /// Calls visit(i) for each voxel i of the mask, in offset order (a thin band's bricks are mostly empty: set bits
+  /// only). A visit that returns bool stops the walk by returning false; forEach then returns false.
+  template <class Visit>
+  bool forEach(Visit&& visit) const {
+    for (int w = 0; w < kBrickVoxels / 64; ++w)
+      for (uint64_t bits = words[size_t(w)]; bits; bits &= bits - 1) {
+        const int i = w * 64 + std::countr_zero(bits);
+        if constexpr (std::is_same_v<decltype(visit(i)), bool>) {
+          if (!visit(i)) return false;
+        } else {
+          visit(i);
+        }
+      }
     return true;
   }
 };

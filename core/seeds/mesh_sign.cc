@@ -644,25 +644,23 @@ void MeshSign::Tables::signByPseudonormal(Brick& brick, const BrickMask& subset,
                                           const uint32_t* site_triangle, double voxel_size, const Vec3d& scale) const {
   uint32_t last = kNoSite;
   Vec3d n{}, v0{};
-  for (int w = 0; w < kBrickVoxels / 64; ++w)
-    for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
-      const int i = w * 64 + std::countr_zero(bits);
-      if (sites[i] == kNoSite) continue;
-      const uint32_t t = site_triangle ? site_triangle[sites[i]] : sites[i];
-      if (t != last) {
-        n = {double(face_n[t].x), double(face_n[t].y), double(face_n[t].z)};
-        v0 = verts[corners[t][0]];
-        last = t;
-      }
-      const Coord c = brick.origin + brickLocal(i);
-      const Vec3d p{c.x * scale.x, c.y * scale.y, c.z * scale.z};
-      const double dist = std::abs(brick.values[i]) / voxel_size;
-      // insidePseudonormal, with the plane kept (the same arithmetic as Normal3f::dot).
-      const Vec3d q = p - v0;
-      const double plane = n.x * q.x + n.y * q.y + n.z * q.z;
-      if (planeDecides(plane, dist) ? plane < 0 : insideByClosestFeature(p, t))
-        brick.values[i] = -std::abs(brick.values[i]);
+  subset.forEach([&](int i) {
+    if (sites[i] == kNoSite) return;
+    const uint32_t t = site_triangle ? site_triangle[sites[i]] : sites[i];
+    if (t != last) {
+      n = {double(face_n[t].x), double(face_n[t].y), double(face_n[t].z)};
+      v0 = verts[corners[t][0]];
+      last = t;
     }
+    const Coord c = brick.origin + brickLocal(i);
+    const Vec3d p{c.x * scale.x, c.y * scale.y, c.z * scale.z};
+    const double dist = std::abs(brick.values[i]) / voxel_size;
+    // insidePseudonormal, with the plane kept (the same arithmetic as Normal3f::dot).
+    const Vec3d q = p - v0;
+    const double plane = n.x * q.x + n.y * q.y + n.z * q.z;
+    if (planeDecides(plane, dist) ? plane < 0 : insideByClosestFeature(p, t))
+      brick.values[i] = -std::abs(brick.values[i]);
+  });
 }
 
 // Winding signs at the pseudonormal's price where that is provably the same answer. Across a consistently oriented
@@ -709,23 +707,22 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   double ref_to_center = std::numeric_limits<double>::infinity();
   float farthest_value = 0;
   Vec3d normal{};
-  for (int w = 0; w < kBrickVoxels / 64; ++w)
-    for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
-      const int i = w * 64 + std::countr_zero(bits);
-      if (sites[i] == kNoSite) return false;
-      farthest_value = std::max(farthest_value, std::abs(brick.values[i]));
-      const uint32_t t = triangleOf(sites[i]);
-      if (t != last) {  // neighbouring voxels mostly share their closest triangle
-        const Vec3d tn{face_n[t].x, face_n[t].y, face_n[t].z};
-        if (last == kNoSite) normal = tn, brick_part = part.empty() ? 0 : part[t];
-        if (normal.dot(tn) <= 0) return false;                     // thin parts: opposite sheets in one brick
-        if (!part.empty() && part[t] != brick_part) return false;  // sheets of two parts
-        last = t;
-      }
-      const double c2 = from_center.distance2(i);
-      if (c2 < ref_to_center) ref_to_center = c2, ref = i;
+  const bool one_sheet = subset.forEach([&](int i) {
+    if (sites[i] == kNoSite) return false;
+    farthest_value = std::max(farthest_value, std::abs(brick.values[i]));
+    const uint32_t t = triangleOf(sites[i]);
+    if (t != last) {  // neighbouring voxels mostly share their closest triangle
+      const Vec3d tn{face_n[t].x, face_n[t].y, face_n[t].z};
+      if (last == kNoSite) normal = tn, brick_part = part.empty() ? 0 : part[t];
+      if (normal.dot(tn) <= 0) return false;                     // thin parts: opposite sheets in one brick
+      if (!part.empty() && part[t] != brick_part) return false;  // sheets of two parts
+      last = t;
     }
-  if (ref < 0) return false;
+    const double c2 = from_center.distance2(i);
+    if (c2 < ref_to_center) ref_to_center = c2, ref = i;
+    return true;
+  });
+  if (!one_sheet || ref < 0) return false;
   const double farthest = double(farthest_value) / voxel_size;
   // Every point of the subset's box is at least this far from the boundary curves. Farther than every voxel's
   // distance to the surface, no voxel's closest point lies on a boundary edge, where "behind the pseudonormal" need not
@@ -734,9 +731,7 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   if (boundary <= farthest) return false;
   double spread2 = 0;  // the farthest voxel from the reference
   const AxisTables from_ref(brick.origin, scale, at(ref));
-  for (int w = 0; w < kBrickVoxels / 64; ++w)
-    for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1)
-      spread2 = std::max(spread2, from_ref.distance2(w * 64 + std::countr_zero(bits)));
+  subset.forEach([&](int i) { spread2 = std::max(spread2, from_ref.distance2(i)); });
   // Off the sheets the winding number turns around a straight boundary edge like theta / (2 pi): by at most
   // spread / (2 pi boundary) over the brick; twice that for curved and several curves.
   const double drift = std::sqrt(spread2) / (std::numbers::pi * boundary);
@@ -767,11 +762,9 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
     // nothing (w0 would be off by the jump). Voxels on a sheet take the outside, as in signBrick.
     if (onSheet(std::abs(brick.values[ref]) / voxel_size)) return false;
     if (front_inside)
-      for (int w = 0; w < kBrickVoxels / 64; ++w)
-        for (uint64_t bits = subset.words[w]; bits; bits &= bits - 1) {
-          const int i = w * 64 + std::countr_zero(bits);
-          if (!onSheet(std::abs(brick.values[i]) / voxel_size)) brick.values[i] = -std::abs(brick.values[i]);
-        }
+      subset.forEach([&](int i) {
+        if (!onSheet(std::abs(brick.values[i]) / voxel_size)) brick.values[i] = -std::abs(brick.values[i]);
+      });
     return true;
   }
   signByPseudonormal(brick, subset, sites, site_triangle, voxel_size, scale);
@@ -878,23 +871,15 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     // brick is wide (plus a margin for rounding) sees no surface inside the brick, so one sign test signs every
     // voxel of it; most bricks beyond a few voxels are like this.
     const double brick_diameter = 7 * std::sqrt(scale.lengthSqr()) + 0.5;  // units
-    auto forEachDelivered = [&](auto&& visit) {
-      for (int w = 0; w < kBrickVoxels / 64; ++w)
-        for (uint64_t bits = brick.mask.words[w]; bits; bits &= bits - 1)
-          if (!visit(w * 64 + std::countr_zero(bits))) return;
-    };
     int far = -1;
-    forEachDelivered([&](int i) {
+    brick.mask.forEach([&](int i) {
       if (sites[i] != kNoSite && std::abs(brick.values[i]) > brick_diameter * voxel_size) far = i;
       return far < 0;
     });
     if (far >= 0) {
       const Vec3d p = unitsOf(brick.origin + brickLocal(far));
       if (s.insidePseudonormal(p, triangleOf(sites[far]), std::abs(brick.values[far]) / voxel_size))
-        forEachDelivered([&](int i) {
-          brick.values[i] = -std::abs(brick.values[i]);
-          return true;
-        });
+        brick.mask.forEach([&](int i) { brick.values[i] = -std::abs(brick.values[i]); });
       return {brick.mask.count(), 0, 0, 0};
     }
     s.signByPseudonormal(brick, brick.mask, sites, site_triangle, voxel_size, scale);
@@ -957,8 +942,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   // over a boundary edge changes it), so its values there depend on the order, and these are its recorded ones.
   std::vector<Ball> balls;
   std::vector<int> order;
-  for (int i = 0; i < kBrickVoxels; ++i)
-    if (todo.test(i)) order.push_back(i);
+  todo.forEach([&](int i) { order.push_back(i); });
   if (method_ == SignMethod::kWinding)
     std::stable_sort(order.begin(), order.end(),
                      [&](int a, int b) { return std::abs(brick.values[a]) > std::abs(brick.values[b]); });
