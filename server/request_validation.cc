@@ -9,6 +9,7 @@
 
 #include "core/field/band_extent.h"
 #include "core/mesh/mesh_grid.h"
+#include "core/seeds/mesh_seeds.h"
 #include "server/asset_parsing.h"
 
 namespace distband {
@@ -294,6 +295,7 @@ void estimateMemory(ResolvedQuery* q) {
       counts.mesh_vertices = mesh.vertices.size();
       counts.mesh_triangles = mesh.triangles.size();
       counts.mesh_area_voxels = meshAreaVoxels(mesh, grid.voxelSize());
+      counts.mesh_scan_pairs = meshScanPairs(grid, mesh, q->plan.meshSeedOptions(grid));
       if (!extent.wholeGrid())
         for (const auto& t : mesh.triangles) {
           const Vec3d a = grid.indexOf(mesh.vertices[t[0]]), b = grid.indexOf(mesh.vertices[t[1]]),

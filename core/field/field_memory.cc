@@ -5,6 +5,9 @@
 
 #include <fmt/format.h>
 
+#include "core/seeds/mesh_seeds.h"
+#include "core/seeds/mesh_sign.h"
+
 namespace distband {
 namespace {
 
@@ -76,6 +79,10 @@ FieldMemoryEstimate estimateFieldMemory(const FieldPlan& plan, const Grid& grid,
     case SeedKind::kMesh: {
       const double band = double(meshBandVoxelEstimate(in.mesh_area_voxels, in.mesh_triangles, touched_voxels));
       seeds = double(in.mesh_triangles) * kMeshBytesPerTriangle + band * kMeshBytesPerBandVoxel;
+      // What the constants do not cover, for long thin triangles: the scan's (brick, triangle) pairs, and the winding
+      // sign's boundary pieces (at most its budget).
+      seeds += double(in.mesh_scan_pairs) * kMeshScanPairBytes;
+      if (plan.mesh_sign == SignMethod::kWinding) seeds += double(MeshSign::maxBoundaryPieceBytes(in.mesh_triangles));
       break;
     }
   }

@@ -27,6 +27,7 @@ struct SeedCounts {
   uint64_t volume_seed_voxels = 0, volume_boundary_voxels = 0;
   uint64_t mesh_vertices = 0, mesh_triangles = 0;
   double mesh_area_voxels = 0;  ///< the mesh's surface area in index space (voxel units squared)
+  uint64_t mesh_scan_pairs = 0;  ///< the seed scan's (brick, triangle) pairs (core/seeds/mesh_seeds.h: meshScanPairs)
 };
 
 struct FieldMemoryEstimate {

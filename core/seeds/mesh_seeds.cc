@@ -57,8 +57,48 @@ struct Candidate {
   int64_t brick;
   uint32_t tri;
 };
+static_assert(sizeof(Candidate) == kMeshScanPairBytes);
+
+// The voxels within `radius` units of triangle `tri` (unit space) by its bounding box, clipped to the grid; false
+// when none (lo > hi).
+bool scanBox(const Grid& grid, const std::array<Vec3d, 3>& tri, double radius, Coord* lo, Coord* hi) {
+  const bool scaled = !grid.cubic();
+  const Coord dims = grid.dims();
+  const Vec3d scale = grid.axisScale();
+  auto range = [&](double a, double b, double c, double s, int n, int32_t* l, int32_t* h) {
+    const double mn = std::min({a, b, c}) - radius, mx = std::max({a, b, c}) + radius;  // units
+    *l = static_cast<int32_t>(std::max(0.0, std::ceil(scaled ? mn / s : mn)));
+    *h = static_cast<int32_t>(std::min(double(n - 1), std::floor(scaled ? mx / s : mx)));
+  };
+  range(tri[0].x, tri[1].x, tri[2].x, scale.x, dims.x, &lo->x, &hi->x);
+  range(tri[0].y, tri[1].y, tri[2].y, scale.y, dims.y, &lo->y, &hi->y);
+  range(tri[0].z, tri[1].z, tri[2].z, scale.z, dims.z, &lo->z, &hi->z);
+  return lo->x <= hi->x && lo->y <= hi->y && lo->z <= hi->z;
+}
+// The bricks a scan box overlaps.
+uint64_t scanBoxBricks(const Coord& lo, const Coord& hi) {
+  return uint64_t((hi.x >> 3) - (lo.x >> 3) + 1) * ((hi.y >> 3) - (lo.y >> 3) + 1) * ((hi.z >> 3) - (lo.z >> 3) + 1);
+}
+// The scan's band radius in units: on an anisotropic grid a voxel step along an axis is up to maxAxisScale() units,
+// and the band must hold voxels on both sides of the surface along every axis.
+double scanRadius(const Grid& grid, const MeshSeedOptions& options) {
+  return std::min(options.band_radius_voxels * grid.maxAxisScale(), options.limit_voxels);
+}
 
 }  // namespace
+
+uint64_t meshScanPairs(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options) {
+  const double radius = scanRadius(grid, options);
+  uint64_t pairs = 0;
+  for (const auto& t : mesh.triangles) {
+    if (t[0] >= mesh.vertices.size() || t[1] >= mesh.vertices.size() || t[2] >= mesh.vertices.size()) continue;
+    const std::array<Vec3d, 3> tri{grid.unitsOf(mesh.vertices[t[0]]), grid.unitsOf(mesh.vertices[t[1]]),
+                                   grid.unitsOf(mesh.vertices[t[2]])};
+    Coord lo, hi;
+    if (scanBox(grid, tri, radius, &lo, &hi)) pairs += scanBoxBricks(lo, hi);
+  }
+  return pairs;
+}
 
 namespace {
 
@@ -181,34 +221,20 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
   const auto buildSign = [&] { sign_status = MeshSign::build(verts, corners, options.sign, interrupter, &built); };
   const bool sign_beside_scan = options.sign == SignMethod::kWinding || options.sign == SignMethod::kParity;
   if (sign_beside_scan) sign_build.run(buildSign);
-  // The band's radius in units: on an anisotropic grid a voxel step along an axis is up to maxAxisScale() units, and
-  // the band must hold voxels on both sides of the surface along every axis.
-  const double radius = std::min(options.band_radius_voxels * grid.maxAxisScale(), options.limit_voxels);
+  const double radius = scanRadius(grid, options);
   const double r2 = radius * radius;
   const Coord dims = grid.dims();
   const Vec3d scale = grid.axisScale();
   const bool scaled = !grid.cubic();
 
   // Voxel box of each triangle's radius-neighbourhood, clipped to the grid (lo > hi: nothing to scan).
-  auto voxelBox = [&](size_t t, Coord* lo, Coord* hi) {
-    const std::array<Vec3d, 3> tri = tris[t];
-    auto range = [&](double a, double b, double c, double s, int n, int32_t* l, int32_t* h) {
-      const double mn = std::min({a, b, c}) - radius, mx = std::max({a, b, c}) + radius;  // units
-      *l = static_cast<int32_t>(std::max(0.0, std::ceil(scaled ? mn / s : mn)));
-      *h = static_cast<int32_t>(std::min(double(n - 1), std::floor(scaled ? mx / s : mx)));
-    };
-    range(tri[0].x, tri[1].x, tri[2].x, scale.x, dims.x, &lo->x, &hi->x);
-    range(tri[0].y, tri[1].y, tri[2].y, scale.y, dims.y, &lo->y, &hi->y);
-    range(tri[0].z, tri[1].z, tri[2].z, scale.z, dims.z, &lo->z, &hi->z);
-    return lo->x <= hi->x && lo->y <= hi->y && lo->z <= hi->z;
-  };
-  // 1. (brick, triangle) candidates: every brick a triangle's neighbourhood overlaps.
+  auto voxelBox = [&](size_t t, Coord* lo, Coord* hi) { return scanBox(grid, tris[t], radius, lo, hi); };
+  // 1. (brick, triangle) candidates: every brick a triangle's neighbourhood overlaps (meshScanPairs of the mesh).
   std::vector<uint64_t> offsets(nt + 1, 0);
   tbb::parallel_for(size_t(0), nt, [&](size_t t) {
     Coord lo, hi;
     if (tbb::is_current_task_group_canceling() || !voxelBox(t, &lo, &hi)) return;
-    offsets[t + 1] = uint64_t((hi.x >> 3) - (lo.x >> 3) + 1) * ((hi.y >> 3) - (lo.y >> 3) + 1) *
-                     ((hi.z >> 3) - (lo.z >> 3) + 1);
+    offsets[t + 1] = scanBoxBricks(lo, hi);
   });
   for (size_t t = 0; t < nt; ++t) offsets[t + 1] += offsets[t];
   if (isInterrupted(interrupter)) return interruptedStatus(interrupter);

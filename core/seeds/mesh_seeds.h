@@ -56,6 +56,13 @@ struct MeshSeedStats {
   double seconds = 0;
 };
 
+/// The (brick, triangle) pairs makeMeshSeeds' scan lists for `mesh` on `grid`: for each triangle, the bricks its
+/// bounding box grown by the band radius overlaps, clipped to the grid. The scan holds kMeshScanPairBytes a pair while
+/// it runs, and long thin triangles make many (a needle across a 4096^3 grid, 512): a memory estimate counts them
+/// (core/field/field_memory.h). O(triangles), no allocation.
+uint64_t meshScanPairs(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options);
+inline constexpr uint64_t kMeshScanPairBytes = 16;
+
 Status makeMeshSeeds(const Grid& grid, const TriangleMesh& mesh, const MeshSeedOptions& options, Seeds* out,
                      MeshSeedStats* stats = nullptr);
 

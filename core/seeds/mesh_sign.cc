@@ -306,6 +306,9 @@ struct MeshSign::Tables {
     }
   };
   std::vector<BoundaryPiece> boundary_pieces;
+  static_assert(sizeof(BoundaryPiece) + sizeof(uint32_t) <= 60, "kBytesPerBoundaryPiece counts 56 + 4");
+  /// Winding: the pieces would exceed maxBoundaryPieces (none were made): every point counts as on a boundary curve.
+  bool boundary_everywhere = false;
   std::unordered_map<Coord, std::vector<uint32_t>, CoordHash> boundary_cells;
   /// Few pieces (no cells): consecutive groups of nearby pieces, each within a ball, so that a query reads the pieces
   /// of the groups that can hold its nearest only.
@@ -382,7 +385,7 @@ struct MeshSign::Tables {
   };
   void findNearBoundary(const Vec3d& center, double reach, NearBoundary* near) const;
   /// A lower bound on the distance (frame units) from every point within `radius` of p to the boundary curves, p
-  /// within near.reach of near.center; kFarFromBoundary when the mesh has none.
+  /// within near.reach of near.center; kFarFromBoundary when the mesh has none, 0 when boundary_everywhere.
   double boundaryDistance(const NearBoundary& near, const Vec3d& p, double radius) const;
   /// The winding number at p, as cheaply as its side of 1/2 allows (windingUntil); `error` gets the error bound of the
   /// value returned.
@@ -551,7 +554,17 @@ Coord boundaryCellOf(const Vec3d& p) {
 
 void MeshSign::Tables::buildBoundaryPieces(std::span<const ChainEdge> chain) {
   // Every edge of the chain: a boundary edge (one use), a non-manifold one (three or more), or one two faces run the
-  // same way (an open part's flipped patch: the winding number turns twice around it).
+  // same way (an open part's flipped patch: the winding number turns twice around it). Counted first: long thin
+  // triangles (an upload of stacked needles) would make pieces without bound; past the budget the curves are taken to
+  // pass everywhere (every sign a query of its own: slower, as right, and the memory bounded).
+  uint64_t pieces = 0;
+  for (const ChainEdge& edge : chain)
+    pieces += uint64_t(std::max(1.0, std::ceil((verts[edge.b] - verts[edge.a]).length() / kBoundaryPiece)));
+  if (pieces > maxBoundaryPieces(triangles)) {
+    boundary_everywhere = true;
+    return;
+  }
+  boundary_pieces.reserve(pieces);
   for (const ChainEdge& edge : chain) {
     const Vec3d a = verts[edge.a], b = verts[edge.b];
     const int n = std::max(1, int(std::ceil((b - a).length() / kBoundaryPiece)));
@@ -640,6 +653,7 @@ void MeshSign::Tables::findNearBoundary(const Vec3d& center, double reach, NearB
 }
 
 double MeshSign::Tables::boundaryDistance(const NearBoundary& near, const Vec3d& p, double radius) const {
+  if (boundary_everywhere) return 0;
   if (boundary_pieces.empty()) return kFarFromBoundary;
   double best2 = std::numeric_limits<double>::infinity();
   for (const auto& [k, d2] : near.pieces) best2 = std::min(best2, boundary_pieces[k].distance2(p));
@@ -1027,10 +1041,11 @@ uint64_t MeshSign::estimateBytes(SignMethod method, uint64_t vertices, uint64_t 
              triangles * (sizeof(std::array<uint32_t, 3>) + sizeof(Normal3f) + 3 * sizeof(uint32_t) + sizeof(Vec3d) +
                           3 * sizeof(double));
     case SignMethod::kWinding: {
-      // The mesh's winding tree, with each triangle's part; then each edge use's key (the boundary chain) and the
-      // boundary fans' tree, at most one fan triangle per kMaxFansPerTriangle.
+      // The mesh's winding tree, with each triangle's part; then each edge use's key (the boundary chain), the
+      // boundary fans' tree, at most one fan triangle per kMaxFansPerTriangle, and the boundary's pieces, each in a
+      // cell of its own at worst.
       return WindingNumber::estimateBytes(triangles) + triangles * sizeof(uint32_t) + triangles * 3 * sizeof(uint64_t) +
-             WindingNumber::estimateBytes(triangles / kMaxFansPerTriangle + 1);
+             WindingNumber::estimateBytes(triangles / kMaxFansPerTriangle + 1) + maxBoundaryPieceBytes(triangles);
     }
     case SignMethod::kParity:
       // Embree's float vertices, indices and BVH (a generous 3x the buffers), and the triangles it is built from.

@@ -93,6 +93,16 @@ class MeshSign {
   uint64_t memoryBytes() const;
   /// An upper bound on memoryBytes() and on the build's peak for a mesh of this size.
   static uint64_t estimateBytes(SignMethod method, uint64_t vertices, uint64_t triangles);
+  /// The most pieces (of at most 16 voxels) the winding sign cuts a mesh's boundary curves into: past this (long thin
+  /// triangles at the boundary, a soup of them) it takes every point to lie on a boundary curve and signs every voxel
+  /// by its own query.
+  static constexpr uint64_t maxBoundaryPieces(uint64_t triangles) { return triangles / 4 + 4096; }
+  /// The most bytes those pieces hold (each piece in a cell of its own at worst).
+  static constexpr uint64_t maxBoundaryPieceBytes(uint64_t triangles) {
+    return maxBoundaryPieces(triangles) * kBytesPerBoundaryPiece;
+  }
+  /// A boundary piece (56), its id in its cell's list (4) and, at worst, a cell to itself (a hash node and a list).
+  static constexpr uint64_t kBytesPerBoundaryPiece = 56 + 4 + 96;
 
  private:
   struct Tables;

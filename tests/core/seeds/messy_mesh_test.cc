@@ -483,6 +483,41 @@ TEST(MessyMeshTest, BeyondTheRimOfAnOpenBoxAWideBandIsSignedByTheWindingNumber) 
   expectContract("open box, band of 16 voxels", c, checkAgainstBruteForce(c));
 }
 
+// A sphere among long thin open triangles (each its own three vertices: all their edges boundary): the boundary
+// curves are longer than the winding sign's budget of pieces (MeshSign::maxBoundaryPieces; an upload of stacked
+// needles would otherwise make pieces without bound), so no certificate or ball can bound its distance to them and
+// every voxel takes a query of its own. The signs are as right as ever.
+TEST(MessyMeshTest, BoundaryCurvesPastThePieceBudgetStillGetTheWindingSign) {
+  TriangleMesh mesh = sphere(0.5);
+  uint64_t seed = 12345;
+  auto uniform = [&] {  // deterministic, in [0, 1)
+    seed = seed * 6364136223846793005ULL + 1442695040888963407ULL;
+    return double(seed >> 11) / double(uint64_t(1) << 53);
+  };
+  constexpr int kNeedles = 450;
+  for (int i = 0; i < kNeedles; ++i) {
+    const Vec3d a = kCentre + Vec3d{-1.4, 2.8 * uniform() - 1.4, 2.8 * uniform() - 1.4};
+    const Vec3d b = a + Vec3d{2.8, 0.3 * uniform(), 0.3 * uniform()};
+    const Vec3d c = b + Vec3d{0, 0.02, 0.02};
+    const auto v = uint32_t(mesh.vertices.size());
+    mesh.vertices.insert(mesh.vertices.end(), {a, b, c});
+    mesh.triangles.push_back({v, v + 1, v + 2});
+  }
+  const int resolution = 96;
+  const Computed c = compute(mesh, SignMethod::kAuto, std::nullopt, resolution);
+  EXPECT_EQ(c.sign, SignMethod::kWinding) << c.reason;
+  // The pieces the boundary would take (16 voxels each at most), past the budget.
+  double pieces = 0;
+  for (int i = 0; i < kNeedles; ++i) {
+    const auto& t = c.mesh.triangles[c.mesh.triangles.size() - 1 - size_t(i)];
+    for (int e = 0; e < 3; ++e)
+      pieces += std::max(
+          1.0, std::ceil((c.mesh.vertices[t[(e + 1) % 3]] - c.mesh.vertices[t[e]]).length() / c.grid.voxelSize() / 16));
+  }
+  EXPECT_GT(pieces, double(MeshSign::maxBoundaryPieces(c.mesh.triangles.size())));
+  expectContract("needles past the piece budget", c, checkAgainstBruteForce(c));
+}
+
 // The pseudonormal of an edge with three or more uses (here: the top face of a cube listed twice) is kept apart from
 // the manifold edges' (computed from the one other triangle): beyond such an edge, outside both faces' planes' wedge,
 // the point is outside through every triangle that has the edge. The same points without the duplicate: the manifold
