@@ -7,7 +7,8 @@
 //     and compares the process's peak RSS growth with this estimate (docs/benchmarks.md has the table); the
 //     estimate must stay above every measurement.
 //   * What is counted: the engine's bricks (per touched voxel, whole bricks), its sparse brick table (per touched
-//     super-block), front and deferred lists, the seeds (band list, site tables, sign data, Embree's BVH, dense region
+//     super-block), front and deferred lists, the seeds (band list, site tables, sign data, Embree's BVH, a mesh scan's
+//     (brick, triangle) pairs and the winding sign's boundary pieces, which grow with long thin triangles, dense region
 //     labels of signed volumes), and one output chunk of bricks. Not counted: the caller's own buffers (a server adds its
 //     stream buffer) and the input asset (already resident).
 // Plain values; thread-safe.
