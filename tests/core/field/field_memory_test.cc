@@ -1,6 +1,6 @@
 // Field memory estimates that depend on a mesh's shape, not only its size: long thin triangles make the seed scan
 // list many (brick, triangle) pairs, which the estimate must count (an upload of stacked needles held 2.2 GB on a
-// 1024 x 9 x 8 grid while estimated at under 100 MB).
+// 1024 x 9 x 8 grid while estimated at about 104 MiB).
 #include "core/field/field_memory.h"
 
 #include <gtest/gtest.h>
