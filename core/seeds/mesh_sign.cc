@@ -557,17 +557,21 @@ void MeshSign::Tables::buildBoundaryPieces(std::span<const ChainEdge> chain) {
   // same way (an open part's flipped patch: the winding number turns twice around it). Counted first: long thin
   // triangles (an upload of stacked needles) would make pieces without bound; past the budget the curves are taken to
   // pass everywhere (every sign a query of its own: slower, as right, and the memory bounded).
-  uint64_t pieces = 0;
-  for (const ChainEdge& edge : chain)
-    pieces += uint64_t(std::max(1.0, std::ceil((verts[edge.b] - verts[edge.a]).length() / kBoundaryPiece)));
-  if (pieces > maxBoundaryPieces(triangles)) {
+  // In doubles: an edge between far-apart vertices of an untrusted mesh needs more pieces than an integer holds (or
+  // infinitely many); once the sum is within the budget, every count fits an int.
+  const auto piecesOf = [&](const ChainEdge& edge) {
+    return std::max(1.0, std::ceil((verts[edge.b] - verts[edge.a]).length() / kBoundaryPiece));
+  };
+  double pieces = 0;
+  for (const ChainEdge& edge : chain) pieces += piecesOf(edge);
+  if (!(pieces <= double(maxBoundaryPieces(triangles)))) {
     boundary_everywhere = true;
     return;
   }
-  boundary_pieces.reserve(pieces);
+  boundary_pieces.reserve(size_t(pieces));
   for (const ChainEdge& edge : chain) {
     const Vec3d a = verts[edge.a], b = verts[edge.b];
-    const int n = std::max(1, int(std::ceil((b - a).length() / kBoundaryPiece)));
+    const int n = int(piecesOf(edge));
     for (int k = 0; k < n; ++k)
       boundary_pieces.emplace_back(a + (b - a) * (double(k) / n), a + (b - a) * (double(k + 1) / n));
   }
