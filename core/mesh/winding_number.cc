@@ -284,6 +284,45 @@ double WindingNumber::principalValue(uint32_t t) const {
   return sum(centroid(tris_[at]), at, kThirdOrderTolerance, beta2_);
 }
 
+double WindingNumber::farTerm(const Node& n, const Vec3d& p) const {
+  // Far field of the cluster's area elements a at x: a . (x - p) / |x - p|^3 expanded at the center: the dipole, then
+  // the second-order term trace(J M^T) with J = I / r^3 - 3 r r^T / r^5 (r = center - p); J is symmetric, so only M's
+  // symmetric part counts.
+  const Vec3d d = n.center - p;
+  const double inv_r = 1.0 / std::sqrt(d.lengthSqr()), inv_r3 = inv_r * inv_r * inv_r;
+  const std::array<float, 6>& m = n.moment;
+  const double rmr = m[0] * d.x * d.x + m[1] * d.y * d.y + m[2] * d.z * d.z +
+                     2.0 * (m[3] * d.x * d.y + m[4] * d.x * d.z + m[5] * d.y * d.z);
+  return n.area.dot(d) * inv_r3 + ((m[0] + m[1] + m[2]) * inv_r3 - 3.0 * rmr * inv_r3 * inv_r * inv_r);
+}
+
+double WindingNumber::leafHalfAngles(const Node& n, const Vec3d& p, uint32_t skip) const {
+  const LeafHalfAngles h(leaves_[n.right], p - n.center, n.radius2);
+  double sum = 0;
+  for (uint32_t i = n.begin; i < n.end; ++i) {
+    if (i == skip) continue;
+    const uint32_t lane = i - n.begin;
+    if (h.unsure[lane]) {
+      const HalfAngle exact = halfAngle(tris_[i], p);
+      sum += std::atan2(exact.num, exact.den);
+    } else {
+      sum += double(h.angle[lane]);
+    }
+  }
+  return sum;
+}
+
+namespace {
+// Far enough for the expansion: beyond beta radii, and its next (third-order) term, of size area * radius^2 /
+// distance^4, small enough.
+bool farEnough(double d2, double radius2, double abs_area, double tolerance, double beta2) {
+  return d2 > beta2 * radius2 && abs_area * radius2 < tolerance * d2 * d2;
+}
+struct TierParameters {
+  double tolerance, beta2;
+};
+}  // namespace
+
 double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance, double beta2) const {
   if (nodes_.empty()) return 0;
   double far = 0;
@@ -293,36 +332,48 @@ double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance, doubl
   stack[top++] = 0;
   while (top > 0) {
     const Node& n = nodes_[stack[--top]];
-    const Vec3d d = n.center - p;
-    const double d2 = d.lengthSqr();
-    // Far enough for the expansion: beyond beta radii, and its next (third-order) term, of size
-    // area * radius^2 / distance^4, small enough.
-    if (d2 > beta2 * n.radius2 && n.abs_area * n.radius2 < tolerance * d2 * d2) {
-      // Far field of the cluster's area elements a at x: a . (x - p) / |x - p|^3 expanded at the center: the dipole,
-      // then the second-order term trace(J M^T) with J = I / r^3 - 3 r r^T / r^5 (r = center - p); J is symmetric, so
-      // only M's symmetric part counts.
-      const double inv_r = 1.0 / std::sqrt(d2), inv_r3 = inv_r * inv_r * inv_r;
-      const std::array<float, 6>& m = n.moment;
-      const double rmr = m[0] * d.x * d.x + m[1] * d.y * d.y + m[2] * d.z * d.z +
-                         2.0 * (m[3] * d.x * d.y + m[4] * d.x * d.z + m[5] * d.y * d.z);
-      far += n.area.dot(d) * inv_r3 + ((m[0] + m[1] + m[2]) * inv_r3 - 3.0 * rmr * inv_r3 * inv_r * inv_r);
+    if (farEnough((n.center - p).lengthSqr(), n.radius2, n.abs_area, tolerance, beta2)) {
+      far += farTerm(n, p);
     } else if (n.left == 0) {
-      const LeafHalfAngles h(leaves_[n.right], p - n.center, n.radius2);
-      for (uint32_t i = n.begin; i < n.end; ++i) {
-        if (i == skip) continue;
-        const uint32_t lane = i - n.begin;
-        if (h.unsure[lane]) {
-          const HalfAngle exact = halfAngle(tris_[i], p);
-          near += std::atan2(exact.num, exact.den);
-        } else {
-          near += double(h.angle[lane]);
-        }
-      }
+      near += leafHalfAngles(n, p, skip);
     } else {
       stack[top++] = n.left;
       stack[top++] = n.right;
     }
   }
+  return (far + 2.0 * near) / (4.0 * std::numbers::pi);
+}
+
+void WindingNumber::plan(const Vec3d& center, double radius, Tier tier, Plan* plan) const {
+  const TierParameters tp = tier == Tier::kRough    ? TierParameters{kRoughThirdOrderTolerance, kRoughBeta * kRoughBeta}
+                            : tier == Tier::kCoarse ? TierParameters{kCoarseThirdOrderTolerance, beta2_}
+                                                    : TierParameters{kThirdOrderTolerance, beta2_};
+  plan->far.clear();
+  plan->near.clear();
+  if (nodes_.empty()) return;
+  uint32_t stack[128];
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const uint32_t id = stack[--top];
+    const Node& n = nodes_[id];
+    // The nearest point of the ball: every point's distance to the center is at least this.
+    const double d = (n.center - center).length() - radius;
+    if (d > 0 && farEnough(d * d, n.radius2, n.abs_area, tp.tolerance, tp.beta2)) {
+      plan->far.push_back(id);
+    } else if (n.left == 0) {
+      plan->near.push_back(id);
+    } else {
+      stack[top++] = n.left;
+      stack[top++] = n.right;
+    }
+  }
+}
+
+double WindingNumber::planned(const Plan& plan, const Vec3d& p) const {
+  double far = 0, near = 0;
+  for (const uint32_t id : plan.far) far += farTerm(nodes_[id], p);
+  for (const uint32_t id : plan.near) near += leafHalfAngles(nodes_[id], p, UINT32_MAX);
   return (far + 2.0 * near) / (4.0 * std::numbers::pi);
 }
 

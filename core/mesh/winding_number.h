@@ -36,6 +36,18 @@ class WindingNumber {
   /// meshes at 512^3): clusters from 1.25 of their radii on stay expansions, up to a hundred times the third-order term
   /// query() allows. For the side of 1/2, or of 0 and 1, where the value is far from it.
   double roughQuery(const Vec3d& p) const;
+  /// The query tiers, finest first as above: query(), coarseQuery(), roughQuery().
+  enum class Tier { kFine, kCoarse, kRough };
+  /// What a tier's query reads for every point within `radius` of `center` (a brick's voxels): the clusters far enough
+  /// from the whole ball to be taken whole there, and the leaves summed exactly. A point's value from it is at least as
+  /// accurate as the tier's query (every cluster passes the query's test at every point of the ball; the query may
+  /// take an ancestor whole), without a traversal per point.
+  struct Plan {
+    std::vector<uint32_t> far, near;  ///< nodes
+  };
+  void plan(const Vec3d& center, double radius, Tier tier, Plan* plan) const;
+  /// w(p) from a plan made for a ball that holds p.
+  double planned(const Plan& plan, const Vec3d& p) const;
   /// w at triangle t's centroid, t itself left out (the principal value on the surface).
   double principalValue(uint32_t t) const;
   /// The exact sum over all triangles (O(T)); for checks.
@@ -72,6 +84,9 @@ class WindingNumber {
   /// The nodes of the subtree over this many triangles.
   static uint32_t nodeCount(uint32_t triangles);
   double sum(const Vec3d& p, uint32_t skip, double tolerance, double beta2) const;
+  /// A cluster's far field at p (times 4 pi); a leaf's half solid angles at p, triangle `skip` left out.
+  double farTerm(const Node& n, const Vec3d& p) const;
+  double leafHalfAngles(const Node& n, const Vec3d& p, uint32_t skip) const;
   double solidAngle(const std::array<Vec3d, 3>& t, const Vec3d& p) const;
 
   std::vector<std::array<Vec3d, 3>> tris_;  ///< in hierarchy order

@@ -387,9 +387,17 @@ struct MeshSign::Tables {
   /// A lower bound on the distance (frame units) from every point within `radius` of p to the boundary curves, p
   /// within near.reach of near.center; kFarFromBoundary when the mesh has none, 0 when boundary_everywhere.
   double boundaryDistance(const NearBoundary& near, const Vec3d& p, double radius) const;
+  /// What the rough tier and the fans' tier read for every voxel of a brick (WindingNumber::plan), made when the first
+  /// of its voxels takes a query of its own: the later ones read the same clusters without a traversal each.
+  struct BrickPlans {
+    Vec3d center;
+    double radius = 0;
+    bool made = false;
+    WindingNumber::Plan rough, fans;
+  };
   /// The winding number at p, as cheaply as its side of 1/2 allows (windingUntil); `error` gets the error bound of the
-  /// value returned.
-  double windingAt(const Vec3d& p, double* error) const;
+  /// value returned. With `plans`, p lies in their ball.
+  double windingAt(const Vec3d& p, double* error, BrickPlans* plans = nullptr) const;
   /// The winding number at p by the cheapest tier whose value and error bound satisfy `decides(value, error)`, else
   /// by the finest; `error` gets the error bound of the value returned. When the rough value does not decide, the
   /// boundary fans' winding number (a query of the few fan triangles near p) plus the integer that brings it within
@@ -397,13 +405,15 @@ struct MeshSign::Tables {
   /// near field is replaced by the boundary's. Should the rough value lie farther from every such sum than its error
   /// bound allows (it never has), the mesh's tiers go on.
   template <class Decides>
-  double windingUntil(const Vec3d& p, const Decides& decides, double* error) const {
+  double windingUntil(const Vec3d& p, const Decides& decides, double* error, BrickPlans* plans = nullptr) const {
     double w = 0;
+    const bool planned = plans && (plans->made || makePlans(plans));
     for (const WindingTier& tier : kWindingTiers) {
-      w = ((*winding).*tier.query)(p), *error = tier.error;
+      const bool rough = tier.query == &WindingNumber::roughQuery;
+      w = planned && rough ? winding->planned(plans->rough, p) : ((*winding).*tier.query)(p), *error = tier.error;
       if (decides(w, *error)) break;
-      if (fans && tier.query == &WindingNumber::roughQuery) {
-        const double fan = fans->query(p), k = std::round(w - fan);
+      if (fans && rough) {
+        const double fan = planned ? fans->planned(plans->fans, p) : fans->query(p), k = std::round(w - fan);
         if (std::abs(w - fan - k) <= tier.error + kFanTierError) {
           *error = kFanTierError;
           return fan + k;
@@ -412,6 +422,8 @@ struct MeshSign::Tables {
     }
     return w;
   }
+  /// Makes a brick's plans; true.
+  bool makePlans(BrickPlans* plans) const;
   /// The winding values a brick's certificates queried, by voxel, each with its error bound.
   class KnownWindings {
    public:
@@ -796,9 +808,15 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   return true;
 }
 
-double MeshSign::Tables::windingAt(const Vec3d& p, double* error) const {
+double MeshSign::Tables::windingAt(const Vec3d& p, double* error, BrickPlans* plans) const {
   const auto far_from_half = [](double w, double w_error) { return std::abs(w - 0.5) > w_error; };
-  return windingUntil(p, far_from_half, error);
+  return windingUntil(p, far_from_half, error, plans);
+}
+
+bool MeshSign::Tables::makePlans(BrickPlans* plans) const {
+  winding->plan(plans->center, plans->radius, WindingNumber::Tier::kRough, &plans->rough);
+  if (fans) fans->plan(plans->center, plans->radius, WindingNumber::Tier::kFine, &plans->fans);
+  return plans->made = true;
 }
 
 MeshSign::MeshSign(SignMethod method) : method_(method), tables_(std::make_unique<Tables>()) {}
@@ -916,12 +934,14 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   double brick_boundary = 0;
   Tables::NearBoundary near;  // winding: the boundary pieces near the brick
   Tables::KnownWindings known;  // winding: the voxels the certificates queried
+  Tables::BrickPlans plans;     // winding: made for the voxels that take queries of their own
   if (method_ == SignMethod::kWinding) {
     auto boxCenter = [&](const Coord& lo, double half) {  // of the voxels lo .. lo + 2 half, in frame units
       return Vec3d{(lo.x + half) * scale.x, (lo.y + half) * scale.y, (lo.z + half) * scale.z};
     };
     const Vec3d brick_center = boxCenter(brick.origin, 3.5);
     const double brick_radius = 3.5 * std::sqrt(scale.lengthSqr());
+    plans.center = brick_center, plans.radius = brick_radius;
     s.findNearBoundary(brick_center, brick_radius, &near);
     if (s.signWindingCertified(brick, brick.mask, brick_center, brick_radius, near, sites, site_triangle, voxel_size,
                                scale, &known))
@@ -1002,7 +1022,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
         // A certificate's value decides here when far enough from 1/2, else the voxel takes its own query.
         const Tables::KnownWindings::Value* found = known.find(i);
         const bool decided = found && std::abs(found->w - 0.5) > found->error;
-        const double w = decided ? found->w : s.windingAt(p, &error);
+        const double w = decided ? found->w : s.windingAt(p, &error, &plans);
         if (decided) error = found->error;
         in = insideByWinding(w);
         // The path from the ball's centre to a voxel it signs lies in the brick and in the ball.
