@@ -124,6 +124,59 @@ TEST(WindingNumberTest, EachQueryStaysWithinItsErrorNearOpenMeshes) {
   }
 }
 
+// A plan (WindingNumber::plan) made for a brick's ball reads, at every point of the ball, clusters that pass the tier's
+// test there: its values stay within the bounds of each tier above, and the rough plan is no worse than the rough
+// query at the same points. Same meshes and scale as above; balls of a brick's radius (8^3 voxels) centred within 3
+// voxels of the surface, ten points in each.
+TEST(WindingNumberTest, PlansStayWithinTheirTiersErrorInTheirBall) {
+  for (const char* name : {"teapot.obj", "bunny.obj"}) {
+    SCOPED_TRACE(name);
+    TriangleMesh mesh;
+    ASSERT_TRUE(IsOk(loadMesh(std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/" + name, &mesh, nullptr)));
+    Vec3d lo, hi;
+    boundsOf(mesh, &lo, &hi);
+    const double scale = 500.0 / std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+    std::vector<std::array<Vec3d, 3>> tris;
+    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+      if (std::string(name) == "bunny.obj" && t % 40 == 0) continue;  // holes
+      const auto& tri = mesh.triangles[t];
+      tris.push_back({(mesh.vertices[tri[0]] - lo) * scale, (mesh.vertices[tri[1]] - lo) * scale,
+                      (mesh.vertices[tri[2]] - lo) * scale});
+    }
+    const WindingNumber wn(tris);
+    const double radius = 3.5 * std::sqrt(3.0);
+    std::mt19937 rng(9);
+    std::uniform_real_distribution<double> u(0, 1), offset(-3, 3), in_ball(-1, 1);
+    double error[3] = {}, rough_query_error = 0;
+    WindingNumber::Plan plans[3];
+    const WindingNumber::Tier tiers[3] = {WindingNumber::Tier::kFine, WindingNumber::Tier::kCoarse,
+                                          WindingNumber::Tier::kRough};
+    for (int box = 0; box < 100; ++box) {
+      const auto& t = tris[rng() % tris.size()];
+      double a = u(rng), b = u(rng);
+      if (a + b > 1) a = 1 - a, b = 1 - b;
+      const Vec3d center = t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b + Vec3d{offset(rng), offset(rng), offset(rng)};
+      for (int k = 0; k < 3; ++k) wn.plan(center, radius, tiers[k], &plans[k]);
+      EXPECT_LE(plans[2].far.size() + plans[2].near.size(), plans[0].far.size() + plans[0].near.size());
+      for (int i = 0; i < 10; ++i) {
+        Vec3d p;
+        do p = {in_ball(rng), in_ball(rng), in_ball(rng)};
+        while (p.lengthSqr() > 1);
+        p = center + p * radius;
+        const double exact = wn.exact(p);
+        for (int k = 0; k < 3; ++k) error[k] = std::max(error[k], std::abs(wn.planned(plans[k], p) - exact));
+        rough_query_error = std::max(rough_query_error, std::abs(wn.roughQuery(p) - exact));
+      }
+    }
+    std::printf("[winding] %s plans: largest error fine %.4f, coarse %.4f, rough %.4f (rough query %.4f)\n", name,
+                error[0], error[1], error[2], rough_query_error);
+    EXPECT_LT(error[0], 0.03);
+    EXPECT_LT(error[1], 0.05);
+    EXPECT_LT(error[2], 0.15);
+    EXPECT_LE(error[2], rough_query_error);
+  }
+}
+
 // The boundary fans (core/mesh/winding_number.h: boundaryFans) have the mesh's boundary, so the mesh's exact winding
 // number minus theirs is an integer everywhere off both (the brute oracle of tests/support for both sums). Meshes: the
 // teapot (open, three parts), a bunny with every 40th face removed, a closed bunny (no boundary, no fans), an open
