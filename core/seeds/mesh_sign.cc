@@ -454,10 +454,11 @@ struct MeshSign::Tables {
   /// Signs the voxels of `subset` (delivered voxels of the brick, all within `radius` frame units of `center`) with
   /// one winding query when that provably agrees with the exact winding number (below); false, nothing signed, else.
   /// A reference in `known` is not queried again, and one queried is added (a refused certificate's value signs its
-  /// reference later).
+  /// reference later). With `plans` (the brick's: the octants' and cells' certificates), its query reads them.
   bool signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
                             const NearBoundary& near, const uint32_t* sites, const uint32_t* site_triangle,
-                            double voxel_size, const Vec3d& scale, KnownWindings* known) const;
+                            double voxel_size, const Vec3d& scale, KnownWindings* known,
+                            BrickPlans* plans = nullptr) const;
 };
 
 void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
@@ -715,7 +716,7 @@ void MeshSign::Tables::signByPseudonormal(Brick& brick, const BrickMask& subset,
 bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
                                             const NearBoundary& near, const uint32_t* sites,
                                             const uint32_t* site_triangle, double voxel_size, const Vec3d& scale,
-                                            KnownWindings* known) const {
+                                            KnownWindings* known, BrickPlans* plans) const {
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
   const auto at = [&](int i) {
     const Coord c = brick.origin + brickLocal(i);
@@ -788,7 +789,7 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   if (const KnownWindings::Value* found = known->find(ref)) {
     value = *found;
   } else {
-    value.w = windingUntil(at(ref), decides, &value.error);
+    value.w = windingUntil(at(ref), decides, &value.error, plans);
     known->add(ref, value);
   }
   if (!decides(value.w, value.error)) return false;
@@ -959,7 +960,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
         const int i = int(k);
         const Coord lo{edge * (i % per_axis), edge * (i / per_axis % per_axis), edge * (i / (per_axis * per_axis))};
         if (!s.signWindingCertified(brick, box, boxCenter(brick.origin + lo, half), half * std::sqrt(scale.lengthSqr()),
-                                    near, sites, site_triangle, voxel_size, scale, &known))
+                                    near, sites, site_triangle, voxel_size, scale, &known, &plans))
           continue;
         certified += box.count();
         for (int w = 0; w < kBrickVoxels / 64; ++w) todo.words[w] &= ~box.words[w];
