@@ -49,8 +49,8 @@ HalfAngle halfAngle(const std::array<Vec3d, 3>& t, const Vec3d& p) {
 // halfAngle of a leaf's triangles, four lanes at a time in single precision: a near query sums tens of triangles,
 // and one at a time in double they were 45 % of its instructions. The corners are stored relative to the leaf's center
 // and p is taken there in double, so the lanes see p's offsets to the corners to ~1e-7 of their length; the triple
-// product is a . ((b - a) x (c - a)), whose normal comes from the corners alone (a . (b x c) cancels to 1e-3 and worse
-// when p is tens of leaf radii away). Single precision decides the angle where the product and the complex factor
+// product is a . ((b - a) x (c - a)), whose normal is the triangle's own, stored (a . (b x c) cancels to 1e-3 and
+// worse when p is tens of leaf radii away). Single precision decides the angle where the product and the complex factor
 // den + i num are well clear of their rounding (a few 1e-7 of la lb lc: an angle within ~2e-5 radians); nearly in a
 // triangle's plane, near an edge or at a corner (a point on the surface, whose angle its signed zeros decide) a lane is
 // `unsure` and the caller takes halfAngle in double.
@@ -91,16 +91,16 @@ struct LeafHalfAngles {
   Int4 unsure;   // per lane: all bits set where the caller must take halfAngle in double
   template <class Leaf>
   LeafHalfAngles(const Leaf& leaf, const Vec3d& p, double radius2) {
-    const auto load = [&](int c, int axis) {
+    const auto load = [](const float* lanes) {
       Float4 v;
-      std::memcpy(&v, leaf.corner[c][axis], sizeof(Float4));
+      std::memcpy(&v, lanes, sizeof(Float4));
       return v;
     };
-    const Float4 Ax = load(0, 0), Ay = load(0, 1), Az = load(0, 2);
-    const Float4 Bx = load(1, 0), By = load(1, 1), Bz = load(1, 2);
-    const Float4 Cx = load(2, 0), Cy = load(2, 1), Cz = load(2, 2);
-    const Float4 ux = Bx - Ax, uy = By - Ay, uz = Bz - Az, vx = Cx - Ax, vy = Cy - Ay, vz = Cz - Az;
-    const Float4 nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
+    const Float4 Ax = load(leaf.corner[0][0]), Ay = load(leaf.corner[0][1]), Az = load(leaf.corner[0][2]);
+    const Float4 Bx = load(leaf.corner[1][0]), By = load(leaf.corner[1][1]), Bz = load(leaf.corner[1][2]);
+    const Float4 Cx = load(leaf.corner[2][0]), Cy = load(leaf.corner[2][1]), Cz = load(leaf.corner[2][2]);
+    const Float4 nx = load(leaf.normal[0]), ny = load(leaf.normal[1]), nz = load(leaf.normal[2]);
+    const Float4 n2 = load(leaf.normal[3]);
     const Float4 px = Float4{} + float(p.x), py = Float4{} + float(p.y), pz = Float4{} + float(p.z);
     const Float4 ax = Ax - px, ay = Ay - py, az = Az - pz, bx = Bx - px, by = By - py, bz = Bz - pz;
     const Float4 cx = Cx - px, cy = Cy - py, cz = Cz - pz;
@@ -112,9 +112,8 @@ struct LeafHalfAngles {
     const Float4 product = la * lb * lc;
     den = product + ab * lc + ac * lb + bc * la;
     const Float4 near_corner = Float4{} + float(kSureCorner2 * radius2);
-    unsure = num * num <= kSureSine2 * la2 * (nx * nx + ny * ny + nz * nz) ||
-             num * num + den * den <= kSureModulus2 * product * product || la2 <= near_corner || lb2 <= near_corner ||
-             lc2 <= near_corner;
+    unsure = num * num <= kSureSine2 * la2 * n2 || num * num + den * den <= kSureModulus2 * product * product ||
+             la2 <= near_corner || lb2 <= near_corner || lc2 <= near_corner;
     angle = atan2_4(num, den);
   }
 };
@@ -149,13 +148,21 @@ WindingNumber::WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double
   for (Node& n : nodes_) {
     if (n.left != 0) continue;
     LeafTriangles& leaf = leaves_[next];
-    for (uint32_t i = n.begin; i < n.end; ++i)
+    for (uint32_t i = n.begin; i < n.end; ++i) {
+      const uint32_t lane = i - n.begin;
       for (int c = 0; c < 3; ++c) {
         const Vec3d v = tris_[i][size_t(c)] - n.center;
-        leaf.corner[c][0][i - n.begin] = float(v.x);
-        leaf.corner[c][1][i - n.begin] = float(v.y);
-        leaf.corner[c][2][i - n.begin] = float(v.z);
+        leaf.corner[c][0][lane] = float(v.x);
+        leaf.corner[c][1][lane] = float(v.y);
+        leaf.corner[c][2][lane] = float(v.z);
       }
+      const auto& t = tris_[i];
+      const Vec3d normal = (t[1] - t[0]).cross(t[2] - t[0]);
+      leaf.normal[0][lane] = float(normal.x);
+      leaf.normal[1][lane] = float(normal.y);
+      leaf.normal[2][lane] = float(normal.z);
+      leaf.normal[3][lane] = float(normal.lengthSqr());
+    }
     n.right = next++;
   }
   interrupter_ = nullptr;
@@ -298,17 +305,18 @@ double WindingNumber::farTerm(const Node& n, const Vec3d& p) const {
 
 double WindingNumber::leafHalfAngles(const Node& n, const Vec3d& p, uint32_t skip) const {
   const LeafHalfAngles h(leaves_[n.right], p - n.center, n.radius2);
-  double sum = 0;
-  for (uint32_t i = n.begin; i < n.end; ++i) {
-    if (i == skip) continue;
-    const uint32_t lane = i - n.begin;
-    if (h.unsure[lane]) {
-      const HalfAngle exact = halfAngle(tris_[i], p);
-      sum += std::atan2(exact.num, exact.den);
-    } else {
-      sum += double(h.angle[lane]);
-    }
-  }
+  // The lanes in use: the leaf's triangles, `skip` left out.
+  const Int4 lane = {0, 1, 2, 3};
+  const Int4 used = lane < int32_t(n.end - n.begin) && lane != int32_t(skip - n.begin);
+  const Float4 sure = used && !h.unsure ? h.angle : Float4{};
+  double sum = double(sure[0]) + double(sure[1]) + double(sure[2]) + double(sure[3]);
+  const Int4 redo = used && h.unsure;
+  if (redo[0] | redo[1] | redo[2] | redo[3])
+    for (uint32_t k = 0; k < 4; ++k)
+      if (redo[k]) {
+        const HalfAngle exact = halfAngle(tris_[n.begin + k], p);
+        sum += std::atan2(exact.num, exact.den);
+      }
   return sum;
 }
 

@@ -78,6 +78,7 @@ class WindingNumber {
   /// keeps ~1e-7 of the leaf's size, far below the distances at which a query's value can change by its error.
   struct alignas(16) LeafTriangles {
     float corner[3][3][4];  ///< [corner][axis][lane]
+    float normal[4][4];     ///< (b - a) x (c - a): [axis][lane], then its squared length by lane
   };
   /// Builds node `id` over triangles [begin, end) of ids_ and, after it, its subtree, numbered depth first.
   void build(uint32_t begin, uint32_t end, uint32_t id);
