@@ -44,6 +44,13 @@ class WindingNumber {
   /// take an ancestor whole), without a traversal per point.
   struct Plan {
     std::vector<uint32_t> far, near;  ///< nodes
+    /// The far clusters again, four to a block in single precision, centers relative to `origin` (the ball's center):
+    /// what planned() reads. Unused lanes hold a cluster of no area far away (a zero term).
+    struct alignas(16) FarLanes {
+      float center[3][4], area[3][4], moment[6][4];  ///< [component][lane]
+    };
+    std::vector<FarLanes> far_lanes;
+    Vec3d origin;
   };
   void plan(const Vec3d& center, double radius, Tier tier, Plan* plan) const;
   /// w(p) from a plan made for a ball that holds p.
