@@ -81,6 +81,33 @@ TEST(WindingNumberTest, InsideAClosedMeshIsOneAndOutsideZero) {
   EXPECT_NEAR(wn.query(hi + (hi - lo)), 0.0, 0.05);
 }
 
+// The teapot, or the bunny with every 40th triangle removed (holes), scaled to a 500-unit box (a 512^3 grid's index
+// frame); empty if the file does not load.
+std::vector<std::array<Vec3d, 3>> openMeshIn500Box(const std::string& name) {
+  TriangleMesh mesh;
+  if (!IsOk(loadMesh(std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/" + name, &mesh, nullptr))) return {};
+  Vec3d lo, hi;
+  boundsOf(mesh, &lo, &hi);
+  const double scale = 500.0 / std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+  std::vector<std::array<Vec3d, 3>> tris;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    if (name == "bunny.obj" && t % 40 == 0) continue;
+    const auto& tri = mesh.triangles[t];
+    tris.push_back({(mesh.vertices[tri[0]] - lo) * scale, (mesh.vertices[tri[1]] - lo) * scale,
+                    (mesh.vertices[tri[2]] - lo) * scale});
+  }
+  return tris;
+}
+
+// A random point of a random triangle, moved by up to 3 units along each axis.
+Vec3d nearSurface(const std::vector<std::array<Vec3d, 3>>& tris, std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(0, 1), offset(-3, 3);
+  const auto& t = tris[rng() % tris.size()];
+  double a = u(rng), b = u(rng);
+  if (a + b > 1) a = 1 - a, b = 1 - b;
+  return t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b + Vec3d{offset(rng), offset(rng), offset(rng)};
+}
+
 // The hierarchy's error near open meshes, where signs are decided: points within 3 units of the surface of the teapot
 // and of a bunny with every 40th triangle removed, both scaled to a 500-unit box (a 512^3 grid's index frame), against
 // the exact sum. query() stays within the 0.03 the signs allow for it, coarseQuery() and roughQuery() within half the
@@ -88,27 +115,13 @@ TEST(WindingNumberTest, InsideAClosedMeshIsOneAndOutsideZero) {
 TEST(WindingNumberTest, EachQueryStaysWithinItsErrorNearOpenMeshes) {
   for (const char* name : {"teapot.obj", "bunny.obj"}) {
     SCOPED_TRACE(name);
-    TriangleMesh mesh;
-    ASSERT_TRUE(IsOk(loadMesh(std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/" + name, &mesh, nullptr)));
-    Vec3d lo, hi;
-    boundsOf(mesh, &lo, &hi);
-    const double scale = 500.0 / std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-    std::vector<std::array<Vec3d, 3>> tris;
-    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-      if (std::string(name) == "bunny.obj" && t % 40 == 0) continue;  // holes
-      const auto& tri = mesh.triangles[t];
-      tris.push_back({(mesh.vertices[tri[0]] - lo) * scale, (mesh.vertices[tri[1]] - lo) * scale,
-                      (mesh.vertices[tri[2]] - lo) * scale});
-    }
+    const std::vector<std::array<Vec3d, 3>> tris = openMeshIn500Box(name);
+    ASSERT_FALSE(tris.empty());
     const WindingNumber wn(tris);
     std::mt19937 rng(5);
-    std::uniform_real_distribution<double> u(0, 1), offset(-3, 3);
     double query_error = 0, coarse_error = 0, rough_error = 0;
     for (int i = 0; i < 3000; ++i) {
-      const auto& t = tris[rng() % tris.size()];
-      double a = u(rng), b = u(rng);
-      if (a + b > 1) a = 1 - a, b = 1 - b;
-      const Vec3d p = t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b + Vec3d{offset(rng), offset(rng), offset(rng)};
+      const Vec3d p = nearSurface(tris, rng);
       const double exact = wn.exact(p);
       query_error = std::max(query_error, std::abs(wn.query(p) - exact));
       coarse_error = std::max(coarse_error, std::abs(wn.coarseQuery(p) - exact));
@@ -131,31 +144,18 @@ TEST(WindingNumberTest, EachQueryStaysWithinItsErrorNearOpenMeshes) {
 TEST(WindingNumberTest, PlansStayWithinTheirTiersErrorInTheirBall) {
   for (const char* name : {"teapot.obj", "bunny.obj"}) {
     SCOPED_TRACE(name);
-    TriangleMesh mesh;
-    ASSERT_TRUE(IsOk(loadMesh(std::string(DISTBAND_TEST_DATA_DIR) + "/meshes/" + name, &mesh, nullptr)));
-    Vec3d lo, hi;
-    boundsOf(mesh, &lo, &hi);
-    const double scale = 500.0 / std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-    std::vector<std::array<Vec3d, 3>> tris;
-    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-      if (std::string(name) == "bunny.obj" && t % 40 == 0) continue;  // holes
-      const auto& tri = mesh.triangles[t];
-      tris.push_back({(mesh.vertices[tri[0]] - lo) * scale, (mesh.vertices[tri[1]] - lo) * scale,
-                      (mesh.vertices[tri[2]] - lo) * scale});
-    }
+    const std::vector<std::array<Vec3d, 3>> tris = openMeshIn500Box(name);
+    ASSERT_FALSE(tris.empty());
     const WindingNumber wn(tris);
     const double radius = 3.5 * std::sqrt(3.0);
     std::mt19937 rng(9);
-    std::uniform_real_distribution<double> u(0, 1), offset(-3, 3), in_ball(-1, 1);
+    std::uniform_real_distribution<double> in_ball(-1, 1);
     double error[3] = {}, rough_query_error = 0;
     WindingNumber::Plan plans[3];
     const WindingNumber::Tier tiers[3] = {WindingNumber::Tier::kFine, WindingNumber::Tier::kCoarse,
                                           WindingNumber::Tier::kRough};
     for (int box = 0; box < 100; ++box) {
-      const auto& t = tris[rng() % tris.size()];
-      double a = u(rng), b = u(rng);
-      if (a + b > 1) a = 1 - a, b = 1 - b;
-      const Vec3d center = t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b + Vec3d{offset(rng), offset(rng), offset(rng)};
+      const Vec3d center = nearSurface(tris, rng);
       for (int k = 0; k < 3; ++k) wn.plan(center, radius, tiers[k], &plans[k]);
       EXPECT_LE(plans[2].far.size() + plans[2].near.size(), plans[0].far.size() + plans[0].near.size());
       for (int i = 0; i < 10; ++i) {
