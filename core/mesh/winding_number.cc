@@ -61,7 +61,8 @@ constexpr float kSureModulus2 = 1e-4f;
 constexpr float kSureCorner2 = 1e-4f;  // every corner at least 1/100 of the leaf's radius from p (squared)
 // On x86-64 the functions that run these lanes also have an AVX2 clone, picked when the program loads (the same
 // four-lane arithmetic, without FMA: the same values; the three-operand encoding spares the register copies SSE needs,
-// ~100 M of the teapot's 4 502 M instructions at 512^3).
+// ~100 M of the teapot's 4 502 M instructions at 512^3). Only functions called from this file: clang names a clone
+// set's dispatcher apart, so a call from another file would not find it.
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #define DISTBAND_AVX2_CLONE __attribute__((target_clones("avx2", "default")))
 #else
@@ -400,7 +401,7 @@ void WindingNumber::plan(const Vec3d& center, double radius, Tier tier, Plan* pl
   }
 }
 
-DISTBAND_AVX2_CLONE double WindingNumber::planned(const Plan& plan, const Vec3d& p) const {
+DISTBAND_AVX2_CLONE double WindingNumber::plannedLanes(const Plan& plan, const Vec3d& p) const {
   // farTerm four clusters at a time, in single precision (each term is within a few 1e-7 of its own size).
   const auto load = [](const float* lanes) {
     Float4 v;
@@ -423,6 +424,8 @@ DISTBAND_AVX2_CLONE double WindingNumber::planned(const Plan& plan, const Vec3d&
   for (const uint32_t id : plan.near) near += leafHalfAngles(nodes_[id], p, UINT32_MAX);
   return (far + 2.0 * near) / (4.0 * std::numbers::pi);
 }
+
+double WindingNumber::planned(const Plan& plan, const Vec3d& p) const { return plannedLanes(plan, p); }
 
 std::vector<ChainEdge> meshBoundaryChain(std::span<const std::array<uint32_t, 3>> triangles) {
   // Each use of an edge as one directed key (core/mesh/triangle_mesh.h: edgeKey).

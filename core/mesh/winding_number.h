@@ -95,6 +95,7 @@ class WindingNumber {
   /// A cluster's far field at p (times 4 pi); a leaf's half solid angles at p, triangle `skip` left out.
   double farTerm(const Node& n, const Vec3d& p) const;
   double leafHalfAngles(const Node& n, const Vec3d& p, uint32_t skip) const;
+  double plannedLanes(const Plan& plan, const Vec3d& p) const;  ///< planned(), in this file only (its clones)
   double solidAngle(const std::array<Vec3d, 3>& t, const Vec3d& p) const;
 
   std::vector<std::array<Vec3d, 3>> tris_;  ///< in hierarchy order
