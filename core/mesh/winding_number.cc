@@ -70,6 +70,11 @@ constexpr float kSureCorner2 = 1e-4f;  // every corner at least 1/100 of the lea
 #endif
 using Float4 = float __attribute__((vector_size(16)));
 using Int4 = int32_t __attribute__((vector_size(16)));
+Float4 loadLanes(const float* lanes) {
+  Float4 v;
+  std::memcpy(&v, lanes, sizeof(Float4));
+  return v;
+}
 Float4 sqrt4(Float4 v) {
 #if defined(__SSE__)
   return Float4(_mm_sqrt_ps(__m128(v)));
@@ -95,31 +100,25 @@ Float4 atan2_4(Float4 y, Float4 x) {
   return y < 0 ? -r : r;
 }
 struct LeafHalfAngles {
-  Float4 num, den;
   Float4 angle;  // atan2(num, den), for the lanes that are sure
   Int4 unsure;   // per lane: all bits set where the caller must take halfAngle in double
   template <class Leaf>
   LeafHalfAngles(const Leaf& leaf, const Vec3d& p, double radius2) {
-    const auto load = [](const float* lanes) {
-      Float4 v;
-      std::memcpy(&v, lanes, sizeof(Float4));
-      return v;
-    };
-    const Float4 Ax = load(leaf.corner[0][0]), Ay = load(leaf.corner[0][1]), Az = load(leaf.corner[0][2]);
-    const Float4 Bx = load(leaf.corner[1][0]), By = load(leaf.corner[1][1]), Bz = load(leaf.corner[1][2]);
-    const Float4 Cx = load(leaf.corner[2][0]), Cy = load(leaf.corner[2][1]), Cz = load(leaf.corner[2][2]);
-    const Float4 nx = load(leaf.normal[0]), ny = load(leaf.normal[1]), nz = load(leaf.normal[2]);
-    const Float4 n2 = load(leaf.normal[3]);
+    const Float4 Ax = loadLanes(leaf.corner[0][0]), Ay = loadLanes(leaf.corner[0][1]), Az = loadLanes(leaf.corner[0][2]);
+    const Float4 Bx = loadLanes(leaf.corner[1][0]), By = loadLanes(leaf.corner[1][1]), Bz = loadLanes(leaf.corner[1][2]);
+    const Float4 Cx = loadLanes(leaf.corner[2][0]), Cy = loadLanes(leaf.corner[2][1]), Cz = loadLanes(leaf.corner[2][2]);
+    const Float4 nx = loadLanes(leaf.normal[0]), ny = loadLanes(leaf.normal[1]), nz = loadLanes(leaf.normal[2]);
+    const Float4 n2 = loadLanes(leaf.normal[3]);
     const Float4 px = Float4{} + float(p.x), py = Float4{} + float(p.y), pz = Float4{} + float(p.z);
     const Float4 ax = Ax - px, ay = Ay - py, az = Az - pz, bx = Bx - px, by = By - py, bz = Bz - pz;
     const Float4 cx = Cx - px, cy = Cy - py, cz = Cz - pz;
     const Float4 la2 = ax * ax + ay * ay + az * az, lb2 = bx * bx + by * by + bz * bz,
                  lc2 = cx * cx + cy * cy + cz * cz;
     const Float4 la = sqrt4(la2), lb = sqrt4(lb2), lc = sqrt4(lc2);
-    num = ax * nx + ay * ny + az * nz;
+    const Float4 num = ax * nx + ay * ny + az * nz;
     const Float4 ab = ax * bx + ay * by + az * bz, ac = ax * cx + ay * cy + az * cz, bc = bx * cx + by * cy + bz * cz;
     const Float4 product = la * lb * lc;
-    den = product + ab * lc + ac * lb + bc * la;
+    const Float4 den = product + ab * lc + ac * lb + bc * la;
     const Float4 near_corner = Float4{} + float(kSureCorner2 * radius2);
     unsure = num * num <= kSureSine2 * la2 * n2 || num * num + den * den <= kSureModulus2 * product * product ||
              la2 <= near_corner || lb2 <= near_corner || lc2 <= near_corner;
@@ -285,19 +284,24 @@ double WindingNumber::exact(const Vec3d& p) const {
   return sum / (4.0 * std::numbers::pi);
 }
 
-double WindingNumber::query(const Vec3d& p) const { return sum(p, UINT32_MAX, kThirdOrderTolerance, beta2_); }
-
-double WindingNumber::coarseQuery(const Vec3d& p) const {
-  return sum(p, UINT32_MAX, kCoarseThirdOrderTolerance, beta2_);
+WindingNumber::TierParameters WindingNumber::parameters(Tier tier) const {
+  switch (tier) {
+    case Tier::kRough: return {kRoughThirdOrderTolerance, kRoughBeta * kRoughBeta};
+    case Tier::kCoarse: return {kCoarseThirdOrderTolerance, beta2_};
+    case Tier::kFine: break;
+  }
+  return {kThirdOrderTolerance, beta2_};
 }
 
-double WindingNumber::roughQuery(const Vec3d& p) const {
-  return sum(p, UINT32_MAX, kRoughThirdOrderTolerance, kRoughBeta * kRoughBeta);
-}
+double WindingNumber::query(const Vec3d& p) const { return sum(p, UINT32_MAX, parameters(Tier::kFine)); }
+
+double WindingNumber::coarseQuery(const Vec3d& p) const { return sum(p, UINT32_MAX, parameters(Tier::kCoarse)); }
+
+double WindingNumber::roughQuery(const Vec3d& p) const { return sum(p, UINT32_MAX, parameters(Tier::kRough)); }
 
 double WindingNumber::principalValue(uint32_t t) const {
   const uint32_t at = position_[t];
-  return sum(centroid(tris_[at]), at, kThirdOrderTolerance, beta2_);
+  return sum(centroid(tris_[at]), at, parameters(Tier::kFine));
 }
 
 double WindingNumber::farTerm(const Node& n, const Vec3d& p) const {
@@ -335,12 +339,9 @@ namespace {
 bool farEnough(double d2, double radius2, double abs_area, double tolerance, double beta2) {
   return d2 > beta2 * radius2 && abs_area * radius2 < tolerance * d2 * d2;
 }
-struct TierParameters {
-  double tolerance, beta2;
-};
 }  // namespace
 
-double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance, double beta2) const {
+double WindingNumber::sum(const Vec3d& p, uint32_t skip, const TierParameters& tp) const {
   if (nodes_.empty()) return 0;
   double far = 0;
   double near = 0;  // the exactly summed triangles' half solid angles
@@ -349,7 +350,7 @@ double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance, doubl
   stack[top++] = 0;
   while (top > 0) {
     const Node& n = nodes_[stack[--top]];
-    if (farEnough((n.center - p).lengthSqr(), n.radius2, n.abs_area, tolerance, beta2)) {
+    if (farEnough((n.center - p).lengthSqr(), n.radius2, n.abs_area, tp.tolerance, tp.beta2)) {
       far += farTerm(n, p);
     } else if (n.left == 0) {
       near += leafHalfAngles(n, p, skip);
@@ -362,9 +363,7 @@ double WindingNumber::sum(const Vec3d& p, uint32_t skip, double tolerance, doubl
 }
 
 void WindingNumber::plan(const Vec3d& center, double radius, Tier tier, Plan* plan) const {
-  const TierParameters tp = tier == Tier::kRough    ? TierParameters{kRoughThirdOrderTolerance, kRoughBeta * kRoughBeta}
-                            : tier == Tier::kCoarse ? TierParameters{kCoarseThirdOrderTolerance, beta2_}
-                                                    : TierParameters{kThirdOrderTolerance, beta2_};
+  const TierParameters tp = parameters(tier);
   plan->far.clear();
   plan->near.clear();
   if (nodes_.empty()) return;
@@ -403,21 +402,16 @@ void WindingNumber::plan(const Vec3d& center, double radius, Tier tier, Plan* pl
 
 DISTBAND_AVX2_CLONE double WindingNumber::plannedLanes(const Plan& plan, const Vec3d& p) const {
   // farTerm four clusters at a time, in single precision (each term is within a few 1e-7 of its own size).
-  const auto load = [](const float* lanes) {
-    Float4 v;
-    std::memcpy(&v, lanes, sizeof(Float4));
-    return v;
-  };
   const Vec3d q = p - plan.origin;
   const Float4 px = Float4{} + float(q.x), py = Float4{} + float(q.y), pz = Float4{} + float(q.z);
   Float4 terms{};
   for (const Plan::FarLanes& b : plan.far_lanes) {
-    const Float4 dx = load(b.center[0]) - px, dy = load(b.center[1]) - py, dz = load(b.center[2]) - pz;
+    const Float4 dx = loadLanes(b.center[0]) - px, dy = loadLanes(b.center[1]) - py, dz = loadLanes(b.center[2]) - pz;
     const Float4 inv_r = 1.0f / sqrt4(dx * dx + dy * dy + dz * dz), inv_r3 = inv_r * inv_r * inv_r;
-    const Float4 m0 = load(b.moment[0]), m1 = load(b.moment[1]), m2 = load(b.moment[2]);
+    const Float4 m0 = loadLanes(b.moment[0]), m1 = loadLanes(b.moment[1]), m2 = loadLanes(b.moment[2]);
     const Float4 rmr = m0 * dx * dx + m1 * dy * dy + m2 * dz * dz +
-                       2.0f * (load(b.moment[3]) * dx * dy + load(b.moment[4]) * dx * dz + load(b.moment[5]) * dy * dz);
-    const Float4 dipole = load(b.area[0]) * dx + load(b.area[1]) * dy + load(b.area[2]) * dz;
+                       2.0f * (loadLanes(b.moment[3]) * dx * dy + loadLanes(b.moment[4]) * dx * dz + loadLanes(b.moment[5]) * dy * dz);
+    const Float4 dipole = loadLanes(b.area[0]) * dx + loadLanes(b.area[1]) * dy + loadLanes(b.area[2]) * dz;
     terms += (dipole + m0 + m1 + m2) * inv_r3 - 3.0f * rmr * inv_r3 * inv_r * inv_r;
   }
   double far = double(terms[0]) + double(terms[1]) + double(terms[2]) + double(terms[3]), near = 0;

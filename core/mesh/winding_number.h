@@ -91,7 +91,12 @@ class WindingNumber {
   void build(uint32_t begin, uint32_t end, uint32_t id);
   /// The nodes of the subtree over this many triangles.
   static uint32_t nodeCount(uint32_t triangles);
-  double sum(const Vec3d& p, uint32_t skip, double tolerance, double beta2) const;
+  /// A tier's test for taking a cluster whole: the largest third-order term (times 4 pi) and beta^2.
+  struct TierParameters {
+    double tolerance, beta2;
+  };
+  TierParameters parameters(Tier tier) const;
+  double sum(const Vec3d& p, uint32_t skip, const TierParameters& tp) const;
   /// A cluster's far field at p (times 4 pi); a leaf's half solid angles at p, triangle `skip` left out.
   double farTerm(const Node& n, const Vec3d& p) const;
   double leafHalfAngles(const Node& n, const Vec3d& p, uint32_t skip) const;
