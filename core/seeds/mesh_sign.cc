@@ -21,6 +21,7 @@
 
 #include "core/geometry.h"
 #include "core/mesh/winding_number.h"
+#include "core/seeds/internal/boundary_curves.h"
 #include "core/seeds/seeds.h"
 
 namespace distband {
@@ -223,8 +224,6 @@ struct Normal3f {
 /// normal): the plane's sign is the answer, no region tests needed.
 bool planeDecides(double plane, double dist) { return plane * plane >= dist * dist * (1 - 1e-5); }
 
-constexpr float kFarFromBoundary = 1e6f;  // frame units: no boundary anywhere near
-
 // The voxels of each kEdge^3 box of a brick: box x + per y + per^2 z (per = 8 / kEdge boxes along an axis).
 template <int kEdge>
 constexpr std::array<BrickMask, (kBrickSize / kEdge) * (kBrickSize / kEdge) * (kBrickSize / kEdge)> makeBoxes() {
@@ -290,34 +289,8 @@ struct MeshSign::Tables {
   std::unique_ptr<ParityScene> parity;
   uint64_t triangles = 0;
   /// Winding: the boundary and non-manifold edges, the curves the winding number turns around without crossing the
-  /// surface, cut into pieces of at most kBoundaryPiece frame units, each filed under the cell of its midpoint.
-  struct BoundaryPiece {
-    Vec3d a, ab;          // from a to a + ab
-    double inverse_len2;  // 1 / |ab|^2, 0 for a point
-    BoundaryPiece(const Vec3d& from, const Vec3d& to) : a(from), ab(to - from) {
-      const double len2 = ab.lengthSqr();
-      inverse_len2 = len2 > 0 ? 1 / len2 : 0;
-    }
-    /// The squared distance from p to the piece (every brick and certificate reads a few dozen: no division).
-    double distance2(const Vec3d& p) const {
-      const Vec3d ap = p - a;
-      const double t = std::clamp(ap.dot(ab) * inverse_len2, 0.0, 1.0);
-      return (ap - ab * t).lengthSqr();
-    }
-  };
-  std::vector<BoundaryPiece> boundary_pieces;
-  static_assert(sizeof(BoundaryPiece) + sizeof(uint32_t) <= 60, "kBytesPerBoundaryPiece counts 56 + 4");
-  /// Winding: the pieces would exceed maxBoundaryPieces (none were made): every point counts as on a boundary curve.
-  bool boundary_everywhere = false;
-  std::unordered_map<Coord, std::vector<uint32_t>, CoordHash> boundary_cells;
-  /// Few pieces (no cells): consecutive groups of nearby pieces, each within a ball, so that a query reads the pieces
-  /// of the groups that can hold its nearest only.
-  struct PieceGroup {
-    Vec3d center;
-    double radius;
-    uint32_t begin, end;
-  };
-  std::vector<PieceGroup> piece_groups;
+  /// surface.
+  seeds_internal::BoundaryCurves boundary;
   /// Winding: each triangle's connected part (findMeshParts), empty when the mesh is one part. Parts may cross or nest,
   /// so the certificate takes a brick only when all its voxels' closest triangles belong to one part.
   std::vector<uint32_t> part;
@@ -375,18 +348,6 @@ struct MeshSign::Tables {
   void signByPseudonormal(Brick& brick, const BrickMask& subset, const uint32_t* sites, const uint32_t* site_triangle,
                           double voxel_size, const Vec3d& scale) const;
   void buildPseudonormals(const Interrupter* interrupter);
-  void buildBoundaryPieces(std::span<const ChainEdge> chain);
-  /// The boundary pieces that can be nearest to a point within `reach` of `center` (found once for a brick, its boxes
-  /// and voxels then bound their distance from a few pieces): every piece not listed is at least `cap` from center.
-  struct NearBoundary {
-    Vec3d center;
-    double cap = 0;
-    std::vector<std::pair<uint32_t, double>> pieces;  // a piece, its squared distance from center
-  };
-  void findNearBoundary(const Vec3d& center, double reach, NearBoundary* near) const;
-  /// A lower bound on the distance (frame units) from every point within `radius` of p to the boundary curves, p
-  /// within near.reach of near.center; kFarFromBoundary when the mesh has none, 0 when boundary_everywhere.
-  double boundaryDistance(const NearBoundary& near, const Vec3d& p, double radius) const;
   /// What the rough tier and the fans' tier read for every voxel of a brick (WindingNumber::plan), made when the first
   /// of its voxels takes a query of its own: the later ones read the same clusters without a traversal each.
   struct BrickPlans {
@@ -456,8 +417,8 @@ struct MeshSign::Tables {
   /// A reference in `known` is not queried again, and one queried is added (a refused certificate's value signs its
   /// reference later). With `plans` (the brick's: the octants' and cells' certificates), its query reads them.
   bool signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
-                            const NearBoundary& near, const uint32_t* sites, const uint32_t* site_triangle,
-                            double voxel_size, const Vec3d& scale, KnownWindings* known,
+                            const seeds_internal::BoundaryCurves::Near& near, const uint32_t* sites,
+                            const uint32_t* site_triangle, double voxel_size, const Vec3d& scale, KnownWindings* known,
                             BrickPlans* plans = nullptr) const;
 };
 
@@ -551,133 +512,6 @@ void MeshSign::Tables::buildPseudonormals(const Interrupter* interrupter) {
   }
 }
 
-// The boundary curves in the grid's index frame, cut into pieces no longer than
-// half a cell so that a piece lies within a quarter cell of the midpoint it is filed under; a query searches the
-// cells within kBoundaryRings of its own and bounds everything farther by the rings' reach. Distances are to the
-// edges themselves: a long boundary edge passes far from its vertices.
-constexpr double kBoundaryCell = 32, kBoundaryPiece = kBoundaryCell / 2;
-constexpr int kBoundaryRings = 2;
-constexpr size_t kBoundaryBrutePieces = 256;  // this few: every query reads them all, exactly, without a cap
-constexpr uint32_t kPieceGroup = 8;
-
-Coord boundaryCellOf(const Vec3d& p) {
-  return {int(std::floor(p.x / kBoundaryCell)), int(std::floor(p.y / kBoundaryCell)),
-          int(std::floor(p.z / kBoundaryCell))};
-}
-
-void MeshSign::Tables::buildBoundaryPieces(std::span<const ChainEdge> chain) {
-  // Every edge of the chain: a boundary edge (one use), a non-manifold one (three or more), or one two faces run the
-  // same way (an open part's flipped patch: the winding number turns twice around it). Counted first: long thin
-  // triangles (an upload of stacked needles) would make pieces without bound; past the budget the curves are taken to
-  // pass everywhere (every sign a query of its own: slower, as right, and the memory bounded).
-  // In doubles: an edge between far-apart vertices of an untrusted mesh needs more pieces than an integer holds (or
-  // infinitely many); once the sum is within the budget, every count fits an int.
-  const auto piecesOf = [&](const ChainEdge& edge) {
-    return std::max(1.0, std::ceil((verts[edge.b] - verts[edge.a]).length() / kBoundaryPiece));
-  };
-  double pieces = 0;
-  for (const ChainEdge& edge : chain) pieces += piecesOf(edge);
-  if (!(pieces <= double(maxBoundaryPieces(triangles)))) {
-    boundary_everywhere = true;
-    return;
-  }
-  boundary_pieces.reserve(size_t(pieces));
-  for (const ChainEdge& edge : chain) {
-    const Vec3d a = verts[edge.a], b = verts[edge.b];
-    const int n = int(piecesOf(edge));
-    for (int k = 0; k < n; ++k)
-      boundary_pieces.emplace_back(a + (b - a) * (double(k) / n), a + (b - a) * (double(k + 1) / n));
-  }
-  if (boundary_pieces.size() <= kBoundaryBrutePieces) {
-    // Groups of at most kPieceGroup pieces by halving along the longest extent of their midpoints.
-    const auto group = [&](const auto& self, uint32_t begin, uint32_t end) -> void {
-      const auto mid = [&](uint32_t k) { return boundary_pieces[k].a + boundary_pieces[k].ab * 0.5; };
-      Vec3d lo = mid(begin), hi = lo;
-      for (uint32_t k = begin; k < end; ++k) {
-        const Vec3d m = mid(k);
-        lo = {std::min(lo.x, m.x), std::min(lo.y, m.y), std::min(lo.z, m.z)};
-        hi = {std::max(hi.x, m.x), std::max(hi.y, m.y), std::max(hi.z, m.z)};
-      }
-      if (end - begin <= kPieceGroup) {
-        PieceGroup g{(lo + hi) * 0.5, 0, begin, end};
-        for (uint32_t k = begin; k < end; ++k)
-          g.radius = std::max({g.radius, (boundary_pieces[k].a - g.center).length(),
-                               (boundary_pieces[k].a + boundary_pieces[k].ab - g.center).length()});
-        piece_groups.push_back(g);
-        return;
-      }
-      const Vec3d e = hi - lo;
-      const int axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
-      const auto key = [&](const BoundaryPiece& piece) {
-        const Vec3d m = piece.a + piece.ab * 0.5;
-        return axis == 0 ? m.x : (axis == 1 ? m.y : m.z);
-      };
-      const uint32_t half = begin + (end - begin) / 2;
-      std::nth_element(boundary_pieces.begin() + begin, boundary_pieces.begin() + half, boundary_pieces.begin() + end,
-                       [&](const BoundaryPiece& x, const BoundaryPiece& y) { return key(x) < key(y); });
-      self(self, begin, half);
-      self(self, half, end);
-    };
-    if (!boundary_pieces.empty()) group(group, 0, uint32_t(boundary_pieces.size()));
-    return;
-  }
-  for (size_t k = 0; k < boundary_pieces.size(); ++k)
-    boundary_cells[boundaryCellOf(boundary_pieces[k].a + boundary_pieces[k].ab * 0.5)].push_back(uint32_t(k));
-}
-
-void MeshSign::Tables::findNearBoundary(const Vec3d& center, double reach, NearBoundary* near) const {
-  near->center = center;
-  near->cap = std::numeric_limits<double>::infinity();
-  near->pieces.clear();
-  if (boundary_pieces.empty()) return;
-  near->pieces.reserve(64);  // grown by doubling from one, it was several allocations a brick
-  // The candidates: the pieces of the groups within `bound` of the center, or those filed within kBoundaryRings
-  // cells. Read twice, the nearest first, so that only the pieces near it are kept (a brick far from a short boundary
-  // would keep all of it).
-  std::array<double, kBoundaryBrutePieces> group_distance;         // to a group's center
-  double nearest_bound = std::numeric_limits<double>::infinity();  // the nearest piece is at most this far
-  for (size_t g = 0; g < piece_groups.size(); ++g) {
-    group_distance[g] = (center - piece_groups[g].center).length();
-    nearest_bound = std::min(nearest_bound, group_distance[g] + piece_groups[g].radius);
-  }
-  auto forEachCandidate = [&](double bound, auto&& visit) {
-    if (boundary_cells.empty()) {
-      for (size_t g = 0; g < piece_groups.size(); ++g)
-        if (group_distance[g] - piece_groups[g].radius <= bound)
-          for (uint32_t k = piece_groups[g].begin; k < piece_groups[g].end; ++k) visit(k);
-      return;
-    }
-    const Coord home = boundaryCellOf(center);
-    for (int z = -kBoundaryRings; z <= kBoundaryRings; ++z)
-      for (int y = -kBoundaryRings; y <= kBoundaryRings; ++y)
-        for (int x = -kBoundaryRings; x <= kBoundaryRings; ++x) {
-          const auto it = boundary_cells.find(Coord{home.x + x, home.y + y, home.z + z});
-          if (it == boundary_cells.end()) continue;
-          for (uint32_t k : it->second) visit(k);
-        }
-  };
-  double best2 = std::numeric_limits<double>::infinity();
-  forEachCandidate(nearest_bound, [&](uint32_t k) { best2 = std::min(best2, boundary_pieces[k].distance2(center)); });
-  // A piece not searched has its midpoint kBoundaryRings cells away or more, and lies within half a piece of it.
-  if (!boundary_cells.empty()) near->cap = kBoundaryRings * kBoundaryCell - kBoundaryPiece / 2;
-  if (best2 == std::numeric_limits<double>::infinity()) return;
-  // A piece farther from the center than the nearest by more than 2 reach is nobody's nearest within reach.
-  const double keep = std::sqrt(best2) + 2 * reach;
-  forEachCandidate(keep, [&](uint32_t k) {
-    const double d2 = boundary_pieces[k].distance2(center);
-    if (d2 <= keep * keep) near->pieces.emplace_back(k, d2);
-  });
-}
-
-double MeshSign::Tables::boundaryDistance(const NearBoundary& near, const Vec3d& p, double radius) const {
-  if (boundary_everywhere) return 0;
-  if (boundary_pieces.empty()) return kFarFromBoundary;
-  double best2 = std::numeric_limits<double>::infinity();
-  for (const auto& [k, d2] : near.pieces) best2 = std::min(best2, boundary_pieces[k].distance2(p));
-  const double cap = near.cap - (p - near.center).length();
-  return std::max(0.0, std::min(std::sqrt(best2), cap) - radius);
-}
-
 void MeshSign::Tables::signByPseudonormal(Brick& brick, const BrickMask& subset, const uint32_t* sites,
                                           const uint32_t* site_triangle, double voxel_size, const Vec3d& scale) const {
   uint32_t last = kNoSite;
@@ -714,7 +548,7 @@ void MeshSign::Tables::signByPseudonormal(Brick& brick, const BrickMask& subset,
 // also send the brick to the per-voxel queries. Not covered: one connected part that crosses itself, or stacks two
 // sheets of the same orientation, within a brick.
 bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
-                                            const NearBoundary& near, const uint32_t* sites,
+                                            const seeds_internal::BoundaryCurves::Near& near, const uint32_t* sites,
                                             const uint32_t* site_triangle, double voxel_size, const Vec3d& scale,
                                             KnownWindings* known, BrickPlans* plans) const {
   auto triangleOf = [site_triangle](uint32_t site) { return site_triangle ? site_triangle[site] : site; };
@@ -765,15 +599,17 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   // Every point of the subset's box is at least this far from the boundary curves. Farther than every voxel's
   // distance to the surface, no voxel's closest point lies on a boundary edge, where "behind the pseudonormal" need not
   // mean across the sheet (beyond a rim, behind the face's plane, the winding number has not jumped).
-  const double boundary = boundaryDistance(near, center, radius);
-  if (boundary <= farthest) return false;
+  const double boundary_distance = boundary.distance(near, center, radius);
+  if (boundary_distance <= farthest) return false;
   double spread2 = 0;  // the farthest voxel from the reference
   const AxisTables from_ref(brick.origin, scale, at(ref));
   subset.forEach([&](int i) { spread2 = std::max(spread2, from_ref.distance2(i)); });
-  // Off the sheets the winding number turns around a straight boundary edge like theta / (2 pi): by at most
-  // spread / (2 pi boundary) over the brick; twice that for curved and several curves.
-  const double drift = std::sqrt(spread2) / (std::numbers::pi * boundary);
-  if (drift + kWindingQueryError >= 0.5) return false;
+  // Off the sheets the winding number turns around the boundary curves by at most the spread times its turn rate
+  // over the box's ball (the straight way from the reference to a voxel stays in the box).
+  const double spread = std::sqrt(spread2);
+  const double drift =
+      spread > 0 ? spread * boundary.turnRate(near, center, radius, (0.5 - kWindingQueryError) / spread) : 0.0;
+  if (!(drift + kWindingQueryError < 0.5)) return false;
   const bool ref_behind = insidePseudonormal(at(ref), triangleOf(sites[ref]), std::abs(brick.values[ref]) / voxel_size);
   // The reference's value less its side's jump is w0, in front of the sheet: the voxels in front are inside when
   // w0 > 1/2, those behind when w0 + 1 > 1/2. The reference's value decides once w0 lies, less the drift and its
@@ -872,7 +708,7 @@ Status MeshSign::build(std::shared_ptr<const std::vector<Vec3d>> vertices,
       if (!isInterrupted(interrupter)) tables.buildPseudonormals(interrupter);
       if (!isInterrupted(interrupter)) {
         const std::vector<ChainEdge> chain = meshBoundaryChain(tables.corners);
-        tables.buildBoundaryPieces(chain);
+        tables.boundary.build(tables.verts, chain, maxBoundaryPieces(tables.triangles));
         uint64_t walked = 0;  // the chain's edges with their multiplicity: the fans have at most 3/2 of these
         for (const ChainEdge& e : chain) walked += uint64_t(std::abs(e.net));
         if (walked > 0 && (3 * walked / 2 + 3) * kMaxFansPerTriangle <= tables.corners.size())
@@ -931,9 +767,9 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   }
   BrickMask todo = brick.mask;  // the voxels still to sign
   int64_t certified = 0;        // signed by a certificate
-  // Winding: every voxel of the brick (and the path between two of them) is at least this far from the boundary.
-  double brick_boundary = 0;
-  Tables::NearBoundary near;  // winding: the boundary pieces near the brick
+  // Winding: a bound on the winding number's turn rate over the brick (and so along the path between two voxels).
+  double brick_rate = std::numeric_limits<double>::infinity();
+  seeds_internal::BoundaryCurves::Near near;  // winding: the boundary pieces near the brick
   Tables::KnownWindings known;  // winding: the voxels the certificates queried
   Tables::BrickPlans plans;     // winding: made for the voxels that take queries of their own
   if (method_ == SignMethod::kWinding) {
@@ -943,7 +779,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     const Vec3d brick_center = boxCenter(brick.origin, 3.5);
     const double brick_radius = 3.5 * std::sqrt(scale.lengthSqr());
     plans.center = brick_center, plans.radius = brick_radius;
-    s.findNearBoundary(brick_center, brick_radius, &near);
+    s.boundary.findNear(brick_center, brick_radius, &near);
     if (s.signWindingCertified(brick, brick.mask, brick_center, brick_radius, near, sites, site_triangle, voxel_size,
                                scale, &known))
       return {0, brick.mask.count(), 0, 0};
@@ -968,7 +804,8 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
     };
     certifyBoxes(kOctants, 4);
     certifyBoxes(kCells, 2);
-    if (!todo.empty()) brick_boundary = s.boundaryDistance(near, brick_center, brick_radius);
+    if (!todo.empty())
+      brick_rate = s.boundary.turnRate(near, brick_center, brick_radius, std::numeric_limits<double>::infinity());
   }
   // Winding number or parity, voxel by voxel: their sign on an open mesh also changes across its holes, away from the
   // surface. A voxel's distance to the surface is a ball around it that no surface crosses: a closed mesh's parity is
@@ -998,6 +835,7 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   std::sort(order.begin(), order.begin() + count);
   std::vector<Ball> balls;
   balls.reserve(size_t(count));
+  const double min_step = std::min({scale.x, scale.y, scale.z});  // between two voxels, frame units
   const double ball_margin = method_ == SignMethod::kWinding ? kWindingBallMargin : 1.0;
   for (int k = 0; k < count; ++k) {
     const int i = int(uint32_t(order[size_t(k)]));
@@ -1026,11 +864,14 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
         const double w = decided ? found->w : s.windingAt(p, &error, &plans);
         if (decided) error = found->error;
         in = insideByWinding(w);
-        // The path from the ball's centre to a voxel it signs lies in the brick and in the ball.
-        const double boundary =
-            sites[i] == kNoSite ? 0 : std::max(brick_boundary, r > 0 ? s.boundaryDistance(near, p, r) : 0.0);
-        if (r > 0 && boundary > 0)
-          balls.push_back({p, r * r, in, std::abs(w - 0.5) - error, 1.0 / (std::numbers::pi * boundary)});
+        // The path from the ball's centre to a voxel it signs lies in the brick and in the ball: the lower of their
+        // turn rates bounds the turn along it. A ball that cannot sign even the nearest other voxel is not kept.
+        const double slack = std::abs(w - 0.5) - error;
+        if (sites[i] != kNoSite && r > 0 && slack > 0) {
+          const double rate =
+              std::min(brick_rate, s.boundary.turnRate(near, p, r, std::min(brick_rate, slack / min_step)));
+          if (rate * min_step < slack) balls.push_back({p, r * r, in, slack, rate});
+        }
       } else {
         in = s.parity->inside(p);
         if (r > 0) balls.push_back({p, r * r, in, 0, 0});
@@ -1042,15 +883,15 @@ SignShares MeshSign::signBrick(Brick& brick, const uint32_t* sites, const uint32
   return method_ == SignMethod::kWinding ? SignShares{0, certified, n, 0} : SignShares{0, 0, 0, n};
 }
 
+static_assert(MeshSign::kBytesPerBoundaryPiece == seeds_internal::BoundaryCurves::kBytesPerPiece);
+
 uint64_t MeshSign::memoryBytes() const {
   const Tables& t = *tables_;
   uint64_t bytes = sizeof(MeshSign) + sizeof(Tables) + t.verts.size() * sizeof(Vec3d) +
                    t.corners.size() * sizeof(t.corners[0]) +
                    (t.face_n.capacity() + t.vertex_n.capacity()) * sizeof(Normal3f) +
                    t.edge_mate.capacity() * sizeof(uint32_t) + t.shared_edge_n.capacity() * sizeof(t.shared_edge_n[0]) +
-                   t.boundary_pieces.capacity() * sizeof(Tables::BoundaryPiece) +
-                   t.boundary_cells.size() * (sizeof(Coord) + 2 * sizeof(void*) + sizeof(std::vector<uint32_t>)) +
-                   t.boundary_pieces.size() * sizeof(uint32_t) + t.part.capacity() * sizeof(uint32_t);
+                   t.boundary.memoryBytes() + t.part.capacity() * sizeof(uint32_t);
   if (t.winding) bytes += t.winding->memoryBytes();
   if (t.fans) bytes += t.fans->memoryBytes();
   if (t.parity) bytes += estimateBytes(SignMethod::kParity, 0, t.triangles);

@@ -101,8 +101,8 @@ class MeshSign {
   static constexpr uint64_t maxBoundaryPieceBytes(uint64_t triangles) {
     return maxBoundaryPieces(triangles) * kBytesPerBoundaryPiece;
   }
-  /// A boundary piece (56), its id in its cell's list (4) and, at worst, a cell to itself (a hash node and a list).
-  static constexpr uint64_t kBytesPerBoundaryPiece = 56 + 4 + 96;
+  /// A boundary piece with its share of the structures over them (core/seeds/internal/boundary_curves.h).
+  static constexpr uint64_t kBytesPerBoundaryPiece = 64 + 4 + 112 + 96;
 
  private:
   struct Tables;
