@@ -128,9 +128,10 @@ void BoundaryCurves::findNear(const Vec3d& center, double reach, Near* near) con
   near->turn_pieces.clear();
   if (pieces_.empty()) return;
   // The turn rate's split. A node far from the ball (more than twice its reach) and small against that distance is
-  // bounded whole (its bound is then at most (1 + kOpen)^2 = 1.56 times its pieces' own); the pieces of nearer leaves
-  // are listed, each bounded again for the smaller balls inside this one (a certificate's box, a voxel's ball),
-  // unless they too are more than twice the reach away: a smaller ball inside would gain little.
+  // bounded whole (its pieces lie within 2 radius of its distance d, so its bound is at most (1 + 2 kOpen)^2 = 2.25
+  // times theirs); the pieces of nearer leaves are listed, each bounded again for the smaller balls inside this one
+  // (a certificate's box, a voxel's ball), unless they too are more than twice the reach away: a smaller ball inside
+  // would gain little.
   constexpr double kOpen = 0.25;
   std::array<uint32_t, 64> stack;
   int top = 0;
