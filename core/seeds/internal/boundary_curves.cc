@@ -92,7 +92,7 @@ void BoundaryCurves::buildTree() {
       n.radius =
           std::max({n.radius, (pieces_[k].a - n.center).length(), (pieces_[k].a + pieces_[k].ab - n.center).length()});
     const bool group = !in_group && end - begin <= kGroup && pieces_.size() <= kBrutePieces;
-    if (group) groups_.push_back({n.center, n.radius, begin, end});
+    if (group) groups_.push_back(node);
     if (end - begin > kTurnLeaf) {
       const Vec3d e = mid_hi - mid_lo;
       const int axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
@@ -115,7 +115,7 @@ void BoundaryCurves::buildTree() {
 }
 
 uint64_t BoundaryCurves::memoryBytes() const {
-  return pieces_.capacity() * sizeof(Piece) + nodes_.capacity() * sizeof(Node) + groups_.capacity() * sizeof(Group) +
+  return pieces_.capacity() * sizeof(Piece) + nodes_.capacity() * sizeof(Node) + groups_.capacity() * sizeof(uint32_t) +
          cells_.size() * (sizeof(Coord) + 2 * sizeof(void*) + sizeof(std::vector<uint32_t>)) +
          (cells_.empty() ? 0 : pieces_.size() * sizeof(uint32_t));
 }
@@ -163,14 +163,17 @@ void BoundaryCurves::findNear(const Vec3d& center, double reach, Near* near) con
   std::array<double, kBrutePieces> group_distance;  // to a group's center
   double nearest_bound = kInfinity;                 // the nearest piece is at most this far
   for (size_t g = 0; g < groups_.size(); ++g) {
-    group_distance[g] = (center - groups_[g].center).length();
-    nearest_bound = std::min(nearest_bound, group_distance[g] + groups_[g].radius);
+    const Node& group = nodes_[groups_[g]];
+    group_distance[g] = (center - group.center).length();
+    nearest_bound = std::min(nearest_bound, group_distance[g] + group.radius);
   }
   auto forEachCandidate = [&](double bound, auto&& visit) {
     if (cells_.empty()) {
-      for (size_t g = 0; g < groups_.size(); ++g)
-        if (group_distance[g] - groups_[g].radius <= bound)
-          for (uint32_t k = groups_[g].begin; k < groups_[g].end; ++k) visit(k);
+      for (size_t g = 0; g < groups_.size(); ++g) {
+        const Node& group = nodes_[groups_[g]];
+        if (group_distance[g] - group.radius <= bound)
+          for (uint32_t k = group.begin; k < group.end; ++k) visit(k);
+      }
       return;
     }
     const Coord home = cellOf(center);

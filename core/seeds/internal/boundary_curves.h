@@ -94,20 +94,15 @@ class BoundaryCurves {
     uint32_t begin, end;
     uint32_t first_child;  // the two children are first_child and first_child + 1; 0 for a leaf
   };
-  /// Few pieces (no cells): consecutive groups of nearby pieces, each within a ball, so that a query reads the pieces
-  /// of the groups that can hold its nearest only.
-  struct Group {
-    Vec3d center;
-    double radius;
-    uint32_t begin, end;
-  };
   static_assert(sizeof(Piece) + sizeof(uint32_t) + 2 * sizeof(Node) <= 180, "kBytesPerPiece counts 64 + 4 + 112");
 
   void buildTree();
 
   std::vector<Piece> pieces_;
   std::vector<Node> nodes_;  // the root first
-  std::vector<Group> groups_;
+  /// Few pieces (no cells): the first nodes of at most kGroup pieces, so that a query reads the pieces of the groups
+  /// that can hold its nearest only.
+  std::vector<uint32_t> groups_;
   std::unordered_map<Coord, std::vector<uint32_t>, CoordHash> cells_;  // many pieces: by the cell of their midpoint
   bool everywhere_ = false;
 };
