@@ -5,7 +5,6 @@
 //     subcommands (query, upload, info, health, and `at --server`) are run by handing the whole command line,
 //     unchanged, to `distband-remote` in the same directory (execv, as git runs its git-<command> helpers).
 //   * `distband-remote` (DISTBAND_FULL_CLI): every subcommand, the service's included.
-#include <malloc.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -15,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "client/batch_heap.h"
 #include "client/cli.h"
 
 namespace {
@@ -48,12 +48,9 @@ int main(int argc, char** argv) {
 #if !defined(DISTBAND_FULL_CLI) && defined(DISTBAND_REMOTE_HELPER)
   if (argc > 1 && isRemoteCommand(argc, argv)) return runRemoteHelper(argv);
 #endif
-  // Grow malloc's heaps 64 MiB at a time and keep that much free at their tops: a command allocates and frees its
-  // mesh, seeds and bricks in quick succession, and with glibc's default (grow and trim to the byte) each round
-  // faults its pages in afresh. Untouched padding costs address space, not memory (peak RSS: unchanged at
-  // armadillo 256^3, +3 % at 512^3); it cut armadillo 256^3's page faults by 20 % and its whole process by ~0.09 s
-  // (bench/whole_process_bench, docs/benchmarks.md).
-  mallopt(M_TOP_PAD, 64 << 20);
+  // A batch command's malloc policy (client/batch_heap.h): large blocks from a heap that grows 64 MiB at a time on
+  // huge pages (page faults cost ~12 µs each on virtual machines).
+  distband::configureBatchHeap();
   distband::installInterruptHandler();
   const std::vector<std::string> args(argv + 1, argv + argc);
   const distband::CliContext context{std::cout, std::cerr, [] { return distband::interruptRequested(); }};
