@@ -277,6 +277,13 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
     auto unitsY = [&](int y) { return kScaled ? y * scale.y : double(y); };
     auto unitsZ = [&](int z) { return kScaled ? z * scale.z : double(z); };
     auto voxelZ = [&](double u) { return kScaled ? u / scale.z : u; };
+    // The first / last voxel on an axis at or after / before `u` units, within the brick from b and the grid.
+    auto firstVoxel = [&](double u, double s, int b) {
+      return std::max(b, ceilInt(std::clamp(kScaled ? u / s : u, double(b) - 1, double(b) + 8)));
+    };
+    auto lastVoxel = [&](double u, double s, int b, int n) {
+      return std::min({n - 1, b + 7, floorInt(std::clamp(kScaled ? u / s : u, double(b) - 1, double(b) + 8))});
+    };
     const int64_t key = cand[starts[b]].brick;
     const Coord borg = grid.brickOrigin(key);
     std::array<double, kBrickVoxels> best;
@@ -285,10 +292,6 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
     best_t.fill(kNoSite);
     for (size_t i = starts[b]; i < starts[b + 1]; ++i) {
       const uint32_t t = cand[i].tri;
-      Coord lo, hi;
-      voxelBox(t, &lo, &hi);
-      lo = {std::max(lo.x, borg.x), std::max(lo.y, borg.y), std::max(lo.z, borg.z)};
-      hi = {std::min(hi.x, borg.x + 7), std::min(hi.y, borg.y + 7), std::min(hi.z, borg.z + 7)};
       const std::array<Vec3d, 3> tri = tris[t];
       const TriangleDistance dist(tri[0], tri[1], tri[2]);
       const Vec3d n = normalized((tri[1] - tri[0]).cross(tri[2] - tri[0]));
@@ -296,6 +299,12 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
       const double bx0 = std::min({tri[0].x, tri[1].x, tri[2].x}), bx1 = std::max({tri[0].x, tri[1].x, tri[2].x});
       const double by0 = std::min({tri[0].y, tri[1].y, tri[2].y}), by1 = std::max({tri[0].y, tri[1].y, tri[2].y});
       const double bz0 = std::min({tri[0].z, tri[1].z, tri[2].z}), bz1 = std::max({tri[0].z, tri[1].z, tri[2].z});
+      // scanBox's voxels within the brick, from this bounding box (the values are clamped near the brick before
+      // they become integers, which changes no bound inside it).
+      const Coord lo{firstVoxel(bx0 - radius, scale.x, borg.x), firstVoxel(by0 - radius, scale.y, borg.y),
+                     firstVoxel(bz0 - radius, scale.z, borg.z)};
+      const Coord hi{lastVoxel(bx1 + radius, scale.x, borg.x, dims.x), lastVoxel(by1 + radius, scale.y, borg.y, dims.y),
+                     lastVoxel(bz1 + radius, scale.z, borg.z, dims.z)};
       for (int x = lo.x; x <= hi.x; ++x) {
         const double ux = unitsX(x);
         const double ex = ux < bx0 ? bx0 - ux : (ux > bx1 ? ux - bx1 : 0.0);
@@ -319,12 +328,11 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
             const double uz = unitsZ(z);
             const double plane = row_plane + n.z * uz;
             const int o = brickOffset(x & 7, y & 7, z & 7);
-            if (plane * plane > best[o]) continue;
-            // The bounding box is no farther than the triangle: a voxel already closer than it to another triangle
-            // skips the exact distance (most do: the triangles near a voxel overlap). The margin is far above
-            // rounding, so a tie or a closer triangle is never skipped.
-            const double ez = uz < bz0 ? bz0 - uz : (uz > bz1 ? uz - bz1 : 0.0);
-            if (exy2 + ez * ez > best[o] + kBoxPruneMargin) continue;
+            // The plane and the bounding box are no farther than the triangle: a voxel already closer than either
+            // to another triangle skips the exact distance (most do: the triangles near a voxel overlap). The box's
+            // margin is far above rounding, so a tie or a closer triangle is never skipped. One test for both.
+            const double ez = std::max(0.0, std::max(bz0 - uz, uz - bz1));
+            if (std::max(plane * plane, exy2 + ez * ez - kBoxPruneMargin) > best[o]) continue;
             const double d2 = dist.dist2({ux, uy, uz});
             if (d2 < best[o] || (d2 == best[o] && t < best_t[o])) best[o] = d2, best_t[o] = t;
           }
