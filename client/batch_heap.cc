@@ -36,8 +36,8 @@ BatchHeap configureBatchHeap() {
   const auto brk_after = reinterpret_cast<uintptr_t>(::sbrk(0));
   // The probe came from the program break's heap only if the break moved and the block lies just below it; a
   // sanitizer's malloc (or a heap that fell back to mmap) leaves the break where it was.
-  const bool from_break = at != 0 && brk_before != uintptr_t(-1) && brk_after > brk_before &&
-                          at + kProbeBytes >= brk_before && at < brk_after;
+  const bool from_break = at != 0 && brk_before != uintptr_t(-1) && brk_after != uintptr_t(-1) &&
+                          brk_after > brk_before && at + kProbeBytes >= brk_before && at < brk_after;
   if (!from_break) return out;
   const uintptr_t begin = roundUpToHugePage(at), end = roundDownToHugePage(brk_after);
   if (begin >= end) return out;

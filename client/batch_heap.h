@@ -1,9 +1,9 @@
 // The CLI's malloc policy for a batch command (one job, then exit): large blocks come from malloc's main heap, which
-// grows in 64 MiB steps and whose first steps are advised to use transparent huge pages (2 MiB pages).
+// grows in 64 MiB steps and whose first step is advised to use transparent huge pages (2 MiB pages).
 // Why: a fresh 4 KiB page costs a page fault, ~12 µs on the virtual machines this runs on (a 256^3 mesh run took
 // 3.3 k of them, ~17 % of its wall time); glibc serves blocks of 128 KiB or more by mmap, each one's pages fresh, and
-// none on huge pages. With the blocks below 32 MiB in the heap and the heap on huge pages, the same run takes ~700
-// faults (docs/benchmarks.md, "The CLI's heap").
+// none on huge pages. With the blocks below 32 MiB in the heap and the heap on huge pages, the same run takes ~1 k
+// faults and 14 % less wall time (docs/benchmarks.md, "The CLI's heap").
 // Contract: call once, first thing in main(), before threads start. Where malloc is not glibc's (a sanitizer's), or
 // the heap cannot grow by the program break, the advice is skipped and only the mallopt settings remain; nothing
 // fails. The long-running server does not use this: its heap stays glibc's default (blocks given back when freed).
