@@ -23,9 +23,7 @@ constexpr size_t kHeapBlockMax = size_t(32) << 20;
 // Grows the heap by itself plus kTopPad, so that there is heap to advise before the command allocates.
 constexpr size_t kProbeBytes = size_t(1) << 20;
 
-}  // namespace
-
-BatchHeap configureBatchHeap() {
+BatchHeap configureOnce() {
   BatchHeap out;
   ::mallopt(M_TOP_PAD, int(kTopPad));
   ::mallopt(M_MMAP_THRESHOLD, int(kHeapBlockMax));
@@ -47,6 +45,13 @@ BatchHeap configureBatchHeap() {
   out.advised_bytes = end - begin;
 #endif
   return out;
+}
+
+}  // namespace
+
+BatchHeap configureBatchHeap() {
+  static const BatchHeap configured = configureOnce();
+  return configured;
 }
 
 }  // namespace distband

@@ -4,9 +4,10 @@
 // 3.3 k of them, ~17 % of its wall time); glibc serves blocks of 128 KiB or more by mmap, each one's pages fresh, and
 // none on huge pages. With the blocks below 32 MiB in the heap and the heap on huge pages, the same run takes ~1 k
 // faults and 14 % less wall time (docs/benchmarks.md, "The CLI's heap").
-// Contract: call once, first thing in main(), before threads start. Where malloc is not glibc's (a sanitizer's), or
-// the heap cannot grow by the program break, the advice is skipped and only the mallopt settings remain; nothing
-// fails. The long-running server does not use this: its heap stays glibc's default (blocks given back when freed).
+// Contract: call first thing in main(), before threads start (later calls change nothing). Where malloc is not glibc's
+// (a sanitizer's), or the heap cannot grow by the program break, the advice is skipped and only the mallopt settings
+// remain; nothing fails. The long-running server does not use this: its heap stays glibc's default (blocks given back
+// when freed).
 #pragma once
 
 #include <cstddef>
@@ -18,7 +19,7 @@ struct BatchHeap {
   const void* advised_begin = nullptr;
 };
 
-/// Applies the policy above; returns what was advised.
+/// Applies the policy above once; returns what was advised (later calls: the first call's result).
 BatchHeap configureBatchHeap();
 
 }  // namespace distband
