@@ -55,9 +55,10 @@ namespace {
 // malloc's heaps cannot hold them, as it held the bricks when they came from malloc: when the inputs' making left a
 // sizeable amount there, it is handed back first rather than staying resident beside them (a 3.33 M-triangle mesh at
 // 1024^3: ~100 MB free in the heap when the engine starts; peak RSS 588 MB without this, 551 MB before the pool).
-// The trim keeps kGiveBackFreeHeap at each heap's top: a batch command's heap grows in steps of that size on huge
-// pages (client/batch_heap.h), untouched for the most part, and trimming it to nothing gave those pages back every run
-// (and on 2 threads a second arena's step alone passed the threshold).
+// The trim keeps kGiveBackFreeHeap at the main heap's top (the free blocks below it, and other arenas' free blocks, it
+// gives back whole): a batch command's heap grows in steps of that size on huge pages (the CLI's policy,
+// client/batch_heap.h), untouched for the most part, and that step alone passes the threshold, so trimming to nothing
+// gave its pages back every run.
 constexpr size_t kGiveBackFreeHeap = size_t(64) << 20;
 
 void giveBackFreeHeap() {
