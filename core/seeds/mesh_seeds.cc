@@ -59,6 +59,15 @@ struct Candidate {
 };
 static_assert(sizeof(Candidate) == kMeshScanPairBytes);
 
+// The voxels [*l, *h] along one axis whose coordinates lie in [mn, mx] units (voxel coordinate times `s` on an
+// anisotropic grid, `scaled`), clipped to [clip_lo, clip_hi]; *l > *h when none. The bounds are clamped to just
+// outside the clip range before they become integers (ceilInt and floorInt truncate), which changes none inside it.
+inline void axisVoxels(double mn, double mx, double s, bool scaled, int clip_lo, int clip_hi, int32_t* l, int32_t* h) {
+  const double lo = double(clip_lo) - 1, hi = double(clip_hi) + 1;
+  *l = std::max(clip_lo, ceilInt(std::clamp(scaled ? mn / s : mn, lo, hi)));
+  *h = std::min(clip_hi, floorInt(std::clamp(scaled ? mx / s : mx, lo, hi)));
+}
+
 // The voxels within `radius` units of triangle `tri` (unit space) by its bounding box, clipped to the grid; false
 // when none (lo > hi).
 bool scanBox(const Grid& grid, const std::array<Vec3d, 3>& tri, double radius, Coord* lo, Coord* hi) {
@@ -66,9 +75,7 @@ bool scanBox(const Grid& grid, const std::array<Vec3d, 3>& tri, double radius, C
   const Coord dims = grid.dims();
   const Vec3d scale = grid.axisScale();
   auto range = [&](double a, double b, double c, double s, int n, int32_t* l, int32_t* h) {
-    const double mn = std::min({a, b, c}) - radius, mx = std::max({a, b, c}) + radius;  // units
-    *l = static_cast<int32_t>(std::max(0.0, std::ceil(scaled ? mn / s : mn)));
-    *h = static_cast<int32_t>(std::min(double(n - 1), std::floor(scaled ? mx / s : mx)));
+    axisVoxels(std::min({a, b, c}) - radius, std::max({a, b, c}) + radius, s, scaled, 0, n - 1, l, h);
   };
   range(tri[0].x, tri[1].x, tri[2].x, scale.x, dims.x, &lo->x, &hi->x);
   range(tri[0].y, tri[1].y, tri[2].y, scale.y, dims.y, &lo->y, &hi->y);
@@ -277,13 +284,6 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
     auto unitsY = [&](int y) { return kScaled ? y * scale.y : double(y); };
     auto unitsZ = [&](int z) { return kScaled ? z * scale.z : double(z); };
     auto voxelZ = [&](double u) { return kScaled ? u / scale.z : u; };
-    // The first / last voxel on an axis at or after / before `u` units, within the brick from b and the grid.
-    auto firstVoxel = [&](double u, double s, int b) {
-      return std::max(b, ceilInt(std::clamp(kScaled ? u / s : u, double(b) - 1, double(b) + 8)));
-    };
-    auto lastVoxel = [&](double u, double s, int b, int n) {
-      return std::min({n - 1, b + 7, floorInt(std::clamp(kScaled ? u / s : u, double(b) - 1, double(b) + 8))});
-    };
     const int64_t key = cand[starts[b]].brick;
     const Coord borg = grid.brickOrigin(key);
     std::array<double, kBrickVoxels> best;
@@ -299,12 +299,11 @@ Status buildMeshSeeds(const Grid& grid, const TriangleMesh& whole_mesh, const Me
       const double bx0 = std::min({tri[0].x, tri[1].x, tri[2].x}), bx1 = std::max({tri[0].x, tri[1].x, tri[2].x});
       const double by0 = std::min({tri[0].y, tri[1].y, tri[2].y}), by1 = std::max({tri[0].y, tri[1].y, tri[2].y});
       const double bz0 = std::min({tri[0].z, tri[1].z, tri[2].z}), bz1 = std::max({tri[0].z, tri[1].z, tri[2].z});
-      // scanBox's voxels within the brick, from this bounding box (the values are clamped near the brick before
-      // they become integers, which changes no bound inside it).
-      const Coord lo{firstVoxel(bx0 - radius, scale.x, borg.x), firstVoxel(by0 - radius, scale.y, borg.y),
-                     firstVoxel(bz0 - radius, scale.z, borg.z)};
-      const Coord hi{lastVoxel(bx1 + radius, scale.x, borg.x, dims.x), lastVoxel(by1 + radius, scale.y, borg.y, dims.y),
-                     lastVoxel(bz1 + radius, scale.z, borg.z, dims.z)};
+      // scanBox's voxels, clipped to the brick, from this bounding box.
+      Coord lo, hi;
+      axisVoxels(bx0 - radius, bx1 + radius, scale.x, kScaled, borg.x, std::min(dims.x - 1, borg.x + 7), &lo.x, &hi.x);
+      axisVoxels(by0 - radius, by1 + radius, scale.y, kScaled, borg.y, std::min(dims.y - 1, borg.y + 7), &lo.y, &hi.y);
+      axisVoxels(bz0 - radius, bz1 + radius, scale.z, kScaled, borg.z, std::min(dims.z - 1, borg.z + 7), &lo.z, &hi.z);
       for (int x = lo.x; x <= hi.x; ++x) {
         const double ux = unitsX(x);
         const double ex = ux < bx0 ? bx0 - ux : (ux > bx1 ? ux - bx1 : 0.0);
