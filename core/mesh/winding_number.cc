@@ -68,14 +68,43 @@ constexpr float kSureCorner2 = 1e-4f;  // every corner at least 1/100 of the lea
 #else
 #define DISTBAND_AVX2_CLONE
 #endif
+// The lanes' helpers are always inlined: each runs in the instructions of the clone it is called from, and eight-lane
+// values never cross a call (whose convention for them differs with and without AVX: -Wpsabi's note).
+#if defined(__GNUC__) || defined(__clang__)
+#define DISTBAND_LANES [[gnu::always_inline]] inline
+#pragma GCC diagnostic ignored "-Wpsabi"
+#else
+#define DISTBAND_LANES inline
+#endif
 using Float4 = float __attribute__((vector_size(16)));
 using Int4 = int32_t __attribute__((vector_size(16)));
+// Eight lanes: a planned query reads its far clusters eight at a time and its near leaves two at a time
+// (Plan::FarLanes, NearLanes; in the AVX2 clone one instruction where four lanes took two, and each lane's arithmetic
+// is the same).
+using Float8 = float __attribute__((vector_size(32)));
 Float4 loadLanes(const float* lanes) {
   Float4 v;
   std::memcpy(&v, lanes, sizeof(Float4));
   return v;
 }
-Float4 sqrt4(Float4 v) {
+using Double4 = double __attribute__((vector_size(32)));
+template <class Half>
+DISTBAND_LANES auto joinLanes(Half first, Half second) {
+  return __builtin_shufflevector(first, second, 0, 1, 2, 3, 4, 5, 6, 7);
+}
+using Int8 = decltype(joinLanes(Int4{}, Int4{}));
+DISTBAND_LANES Float8 loadLanes8(const float* lanes) {
+  Float8 v;
+  std::memcpy(&v, lanes, sizeof(Float8));
+  return v;
+}
+/// The first and second blocks of four lanes (Float4 or Int4) of eight.
+template <class Half, class Whole>
+DISTBAND_LANES std::array<Half, 2> splitLanes(const Whole& v) {
+  static_assert(sizeof(Whole) == 2 * sizeof(Half));
+  return {__builtin_shufflevector(v, v, 0, 1, 2, 3), __builtin_shufflevector(v, v, 4, 5, 6, 7)};
+}
+Float4 sqrtLanes(Float4 v) {
 #if defined(__SSE__)
   return Float4(_mm_sqrt_ps(__m128(v)));
 #else
@@ -83,48 +112,93 @@ Float4 sqrt4(Float4 v) {
   return v;
 #endif
 }
-// atan2 four lanes at a time (Cephes' atanf: |y| / |x| or its inverse reduced to [0, tan(pi/8)] about pi/4, an odd
+DISTBAND_LANES Float8 sqrtLanes(Float8 v) {
+  const auto [first, second] = splitLanes<Float4>(v);
+  return joinLanes(sqrtLanes(first), sqrtLanes(second));  // no eight-lane square root in every clone's instructions
+}
+// atan2 lane by lane (Cephes' atanf: |y| / |x| or its inverse reduced to [0, tan(pi/8)] about pi/4, an odd
 // polynomial of degree 9, then the quadrant): within ~3e-7 radians. A near query's angles as one sum: the product of
 // the factors den + i num (a complex multiply each instead of libm's atan2) was a serial chain, 15 % of a query.
-Float4 atan2_4(Float4 y, Float4 x) {
-  const Float4 ax = x < 0 ? -x : x, ay = y < 0 ? -y : y;
-  const Float4 big = ax > ay ? ax : ay, small = ax > ay ? ay : ax;
-  const Float4 a = small / big;  // in [0, 1]
-  const Int4 past = a > 0.41421356f;
-  const Float4 t = past ? (a - 1.0f) / (a + 1.0f) : a, z = t * t;
-  Float4 r =
-      (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * t + t;
+template <class Lanes>
+DISTBAND_LANES Lanes atan2Lanes(Lanes y, Lanes x) {
+  const Lanes ax = x < 0 ? -x : x, ay = y < 0 ? -y : y;
+  const Lanes big = ax > ay ? ax : ay, small = ax > ay ? ay : ax;
+  const Lanes a = small / big;  // in [0, 1]
+  const auto past = a > 0.41421356f;
+  const Lanes t = past ? (a - 1.0f) / (a + 1.0f) : a, z = t * t;
+  Lanes r = (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z - 3.33329491539e-1f) * z * t + t;
   r = past ? r + float(std::numbers::pi / 4) : r;
   r = ay > ax ? float(std::numbers::pi / 2) - r : r;
   r = x < 0 ? float(std::numbers::pi) - r : r;
   return y < 0 ? -r : r;
 }
+/// The half solid angles of one leaf's triangles (Float4) or of two leaves' (Float8), `p` taken relative to each
+/// leaf's center (`relative`: the lanes of its coordinates; `near_corner`: kSureCorner2 times each leaf's squared
+/// radius) and `load(row)` giving a row of the leaves' lanes: corner[c][axis] as row 3 c + axis, then normal[k] as
+/// row 9 + k.
+template <class Lanes>
 struct LeafHalfAngles {
-  Float4 angle;  // atan2(num, den), for the lanes that are sure
-  Int4 unsure;   // per lane: all bits set where the caller must take halfAngle in double
-  template <class Leaf>
-  LeafHalfAngles(const Leaf& leaf, const Vec3d& p, double radius2) {
-    const Float4 Ax = loadLanes(leaf.corner[0][0]), Ay = loadLanes(leaf.corner[0][1]), Az = loadLanes(leaf.corner[0][2]);
-    const Float4 Bx = loadLanes(leaf.corner[1][0]), By = loadLanes(leaf.corner[1][1]), Bz = loadLanes(leaf.corner[1][2]);
-    const Float4 Cx = loadLanes(leaf.corner[2][0]), Cy = loadLanes(leaf.corner[2][1]), Cz = loadLanes(leaf.corner[2][2]);
-    const Float4 nx = loadLanes(leaf.normal[0]), ny = loadLanes(leaf.normal[1]), nz = loadLanes(leaf.normal[2]);
-    const Float4 n2 = loadLanes(leaf.normal[3]);
-    const Float4 px = Float4{} + float(p.x), py = Float4{} + float(p.y), pz = Float4{} + float(p.z);
-    const Float4 ax = Ax - px, ay = Ay - py, az = Az - pz, bx = Bx - px, by = By - py, bz = Bz - pz;
-    const Float4 cx = Cx - px, cy = Cy - py, cz = Cz - pz;
-    const Float4 la2 = ax * ax + ay * ay + az * az, lb2 = bx * bx + by * by + bz * bz,
-                 lc2 = cx * cx + cy * cy + cz * cz;
-    const Float4 la = sqrt4(la2), lb = sqrt4(lb2), lc = sqrt4(lc2);
-    const Float4 num = ax * nx + ay * ny + az * nz;
-    const Float4 ab = ax * bx + ay * by + az * bz, ac = ax * cx + ay * cy + az * cz, bc = bx * cx + by * cy + bz * cz;
-    const Float4 product = la * lb * lc;
-    const Float4 den = product + ab * lc + ac * lb + bc * la;
-    const Float4 near_corner = Float4{} + float(kSureCorner2 * radius2);
+  Lanes angle;                         // atan2(num, den), for the lanes that are sure
+  decltype(Lanes{} < Lanes{}) unsure;  // per lane: all bits set where the caller must take halfAngle in double
+  template <class Load>
+  DISTBAND_LANES LeafHalfAngles(const Load& load, const std::array<Lanes, 3>& relative, Lanes near_corner) {
+    const Lanes ax = load(0) - relative[0], ay = load(1) - relative[1], az = load(2) - relative[2];
+    const Lanes bx = load(3) - relative[0], by = load(4) - relative[1], bz = load(5) - relative[2];
+    const Lanes cx = load(6) - relative[0], cy = load(7) - relative[1], cz = load(8) - relative[2];
+    const Lanes nx = load(9), ny = load(10), nz = load(11), n2 = load(12);
+    const Lanes la2 = ax * ax + ay * ay + az * az, lb2 = bx * bx + by * by + bz * bz, lc2 = cx * cx + cy * cy + cz * cz;
+    const Lanes la = sqrtLanes(la2), lb = sqrtLanes(lb2), lc = sqrtLanes(lc2);
+    const Lanes num = ax * nx + ay * ny + az * nz;
+    const Lanes ab = ax * bx + ay * by + az * bz, ac = ax * cx + ay * cy + az * cz, bc = bx * cx + by * cy + bz * cz;
+    const Lanes product = la * lb * lc;
+    const Lanes den = product + ab * lc + ac * lb + bc * la;
     unsure = num * num <= kSureSine2 * la2 * n2 || num * num + den * den <= kSureModulus2 * product * product ||
              la2 <= near_corner || lb2 <= near_corner || lc2 <= near_corner;
-    angle = atan2_4(num, den);
+    angle = atan2Lanes(num, den);
   }
 };
+/// A leaf's row (LeafHalfAngles' numbering).
+template <class Leaf>
+const float* leafRow(const Leaf& leaf, int row) {
+  return row < 9 ? leaf.corner[row / 3][row % 3] : leaf.normal[row - 9];
+}
+/// farTerm of a plan's clusters (Plan::FarLanes) lane by lane, p relative to the plan's origin; `load(row)` gives a
+/// row of their lanes: center[axis] as row axis, area[axis] as 3 + axis, moment[m] as 6 + m.
+template <class Lanes, class Load>
+DISTBAND_LANES Lanes farTerms(const Load& load, Lanes px, Lanes py, Lanes pz) {
+  const Lanes dx = load(0) - px, dy = load(1) - py, dz = load(2) - pz;
+  const Lanes inv_r = 1.0f / sqrtLanes(dx * dx + dy * dy + dz * dz), inv_r3 = inv_r * inv_r * inv_r;
+  const Lanes m0 = load(6), m1 = load(7), m2 = load(8);
+  const Lanes rmr =
+      m0 * dx * dx + m1 * dy * dy + m2 * dz * dz + 2.0f * (load(9) * dx * dy + load(10) * dx * dz + load(11) * dy * dz);
+  const Lanes dipole = load(3) * dx + load(4) * dy + load(5) * dz;
+  return (dipole + m0 + m1 + m2) * inv_r3 - 3.0f * rmr * inv_r3 * inv_r * inv_r;
+}
+template <class Block>
+const float* farRow(const Block& block, int row) {
+  return row < 3 ? block.center[row] : row < 6 ? block.area[row - 3] : block.moment[row - 6];
+}
+/// Eight lanes of one value.
+DISTBAND_LANES Float8 laneValue8(double v) { return Float8{} + float(v); }
+/// Four lanes of one value, in single precision (p's coordinates relative to a leaf's center, as its corners).
+Float4 laneValue(double v) { return Float4{} + float(v); }
+/// A leaf's sum of half solid angles from its lanes: the sure ones in lane order, then those unsure in double
+/// (`skip`: a lane left out, or none).
+double sumLeafLanes(const std::array<Vec3d, 3>* tris, uint32_t count, uint32_t skip, const Vec3d& p, Float4 angle,
+                    Int4 unsure) {
+  const Int4 lane = {0, 1, 2, 3};
+  const Int4 used = lane < int32_t(count) && lane != int32_t(skip);
+  const Float4 sure = used && !unsure ? angle : Float4{};
+  double sum = double(sure[0]) + double(sure[1]) + double(sure[2]) + double(sure[3]);
+  const Int4 redo = used && unsure;
+  if (redo[0] | redo[1] | redo[2] | redo[3])
+    for (uint32_t k = 0; k < 4; ++k)
+      if (redo[k]) {
+        const HalfAngle exact = halfAngle(tris[k], p);
+        sum += std::atan2(exact.num, exact.den);
+      }
+  return sum;
+}
 
 }  // namespace
 
@@ -317,20 +391,11 @@ double WindingNumber::farTerm(const Node& n, const Vec3d& p) const {
 }
 
 DISTBAND_AVX2_CLONE double WindingNumber::leafHalfAngles(const Node& n, const Vec3d& p, uint32_t skip) const {
-  const LeafHalfAngles h(leaves_[n.right], p - n.center, n.radius2);
-  // The lanes in use: the leaf's triangles, `skip` left out.
-  const Int4 lane = {0, 1, 2, 3};
-  const Int4 used = lane < int32_t(n.end - n.begin) && lane != int32_t(skip - n.begin);
-  const Float4 sure = used && !h.unsure ? h.angle : Float4{};
-  double sum = double(sure[0]) + double(sure[1]) + double(sure[2]) + double(sure[3]);
-  const Int4 redo = used && h.unsure;
-  if (redo[0] | redo[1] | redo[2] | redo[3])
-    for (uint32_t k = 0; k < 4; ++k)
-      if (redo[k]) {
-        const HalfAngle exact = halfAngle(tris_[n.begin + k], p);
-        sum += std::atan2(exact.num, exact.den);
-      }
-  return sum;
+  const LeafTriangles& leaf = leaves_[n.right];
+  const Vec3d q = p - n.center;
+  const LeafHalfAngles<Float4> h([&](int row) { return loadLanes(leafRow(leaf, row)); },
+                                 {laneValue(q.x), laneValue(q.y), laneValue(q.z)}, laneValue(kSureCorner2 * n.radius2));
+  return sumLeafLanes(&tris_[n.begin], n.end - n.begin, skip - n.begin, p, h.angle, h.unsure);
 }
 
 namespace {
@@ -388,34 +453,70 @@ void WindingNumber::plan(const Vec3d& center, double radius, Tier tier, Plan* pl
   Plan::FarLanes unused{};
   for (auto& axis : unused.center)
     for (float& v : axis) v = 1e6f;  // frame units beyond any grid's: 1e-18 of a unit area's term, times its zero area
-  plan->far_lanes.assign((plan->far.size() + 3) / 4, unused);
+  plan->far_lanes.assign((plan->far.size() + 7) / 8, unused);
   for (size_t k = 0; k < plan->far.size(); ++k) {
     const Node& n = nodes_[plan->far[k]];
-    Plan::FarLanes& block = plan->far_lanes[k / 4];
-    const size_t lane = k % 4;
+    Plan::FarLanes& block = plan->far_lanes[k / 8];
+    const size_t lane = k % 8;
     const Vec3d c = n.center - center;
     block.center[0][lane] = float(c.x), block.center[1][lane] = float(c.y), block.center[2][lane] = float(c.z);
     block.area[0][lane] = float(n.area.x), block.area[1][lane] = float(n.area.y), block.area[2][lane] = float(n.area.z);
     for (size_t m = 0; m < 6; ++m) block.moment[m][lane] = n.moment[m];
   }
+  plan->near_lanes.assign((plan->near.size() + 1) / 2, Plan::NearLanes{});
+  for (size_t k = 0; k < plan->near.size(); ++k) {
+    const Node& n = nodes_[plan->near[k]];
+    const LeafTriangles& leaf = leaves_[n.right];
+    Plan::NearLanes& block = plan->near_lanes[k / 2];
+    const size_t half = k % 2;
+    for (size_t lane = 0; lane < 4; ++lane) {
+      const size_t to = 4 * half + lane;
+      for (size_t c = 0; c < 3; ++c)
+        for (size_t axis = 0; axis < 3; ++axis) block.corner[c][axis][to] = leaf.corner[c][axis][lane];
+      for (size_t row = 0; row < 4; ++row) block.normal[row][to] = leaf.normal[row][lane];
+      block.near_corner[to] = float(kSureCorner2 * n.radius2);
+      block.used[to] = lane < n.end - n.begin ? -1 : 0;
+    }
+    block.center[half] = n.center;
+    block.begin[half] = n.begin;
+  }
 }
 
 DISTBAND_AVX2_CLONE double WindingNumber::plannedLanes(const Plan& plan, const Vec3d& p) const {
-  // farTerm four clusters at a time, in single precision (each term is within a few 1e-7 of its own size).
+  // farTerm in single precision (each term is within a few 1e-7 of its own size), then the near leaves' half angles,
+  // two leaves a block, summed lane by lane in double.
   const Vec3d q = p - plan.origin;
-  const Float4 px = Float4{} + float(q.x), py = Float4{} + float(q.y), pz = Float4{} + float(q.z);
-  Float4 terms{};
-  for (const Plan::FarLanes& b : plan.far_lanes) {
-    const Float4 dx = loadLanes(b.center[0]) - px, dy = loadLanes(b.center[1]) - py, dz = loadLanes(b.center[2]) - pz;
-    const Float4 inv_r = 1.0f / sqrt4(dx * dx + dy * dy + dz * dz), inv_r3 = inv_r * inv_r * inv_r;
-    const Float4 m0 = loadLanes(b.moment[0]), m1 = loadLanes(b.moment[1]), m2 = loadLanes(b.moment[2]);
-    const Float4 rmr = m0 * dx * dx + m1 * dy * dy + m2 * dz * dz +
-                       2.0f * (loadLanes(b.moment[3]) * dx * dy + loadLanes(b.moment[4]) * dx * dz + loadLanes(b.moment[5]) * dy * dz);
-    const Float4 dipole = loadLanes(b.area[0]) * dx + loadLanes(b.area[1]) * dy + loadLanes(b.area[2]) * dz;
-    terms += (dipole + m0 + m1 + m2) * inv_r3 - 3.0f * rmr * inv_r3 * inv_r * inv_r;
+  const Float8 px = laneValue8(q.x), py = laneValue8(q.y), pz = laneValue8(q.z);
+  Float8 terms{};
+  for (const Plan::FarLanes& block : plan.far_lanes)
+    terms += farTerms([&](int row) { return loadLanes8(farRow(block, row)); }, px, py, pz);
+  double far = 0, near = 0;  // near: the unsure lanes' angles, in double
+  for (int lane = 0; lane < 8; ++lane) far += double(terms[lane]);
+  Double4 first_angles{}, second_angles{};  // the sure lanes', of each block's first and second leaf
+  for (const Plan::NearLanes& block : plan.near_lanes) {
+    const Vec3d q1 = p - block.center[0], q2 = p - block.center[1];
+    const LeafHalfAngles<Float8> h(
+        [&](int row) { return loadLanes8(leafRow(block, row)); },
+        {joinLanes(laneValue(q1.x), laneValue(q2.x)), joinLanes(laneValue(q1.y), laneValue(q2.y)),
+         joinLanes(laneValue(q1.z), laneValue(q2.z))},
+        loadLanes8(block.near_corner));
+    Int8 used;
+    std::memcpy(&used, block.used, sizeof(used));
+    const auto [sure1, sure2] = splitLanes<Float4>(used && !h.unsure ? h.angle : Float8{});
+    first_angles += __builtin_convertvector(sure1, Double4);
+    second_angles += __builtin_convertvector(sure2, Double4);
+    const Int8 redo = used && h.unsure;
+    const auto [redo1, redo2] = splitLanes<Int4>(redo);
+    const Int4 any = redo1 | redo2;
+    if (any[0] | any[1] | any[2] | any[3])
+      for (int lane = 0; lane < 8; ++lane)
+        if (redo[lane]) {
+          const HalfAngle exact = halfAngle(tris_[block.begin[lane / 4] + uint32_t(lane % 4)], p);
+          near += std::atan2(exact.num, exact.den);
+        }
   }
-  double far = double(terms[0]) + double(terms[1]) + double(terms[2]) + double(terms[3]), near = 0;
-  for (const uint32_t id : plan.near) near += leafHalfAngles(nodes_[id], p, UINT32_MAX);
+  const Double4 angles = first_angles + second_angles;
+  near += angles[0] + angles[1] + angles[2] + angles[3];
   return (far + 2.0 * near) / (4.0 * std::numbers::pi);
 }
 

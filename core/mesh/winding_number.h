@@ -44,12 +44,23 @@ class WindingNumber {
   /// take an ancestor whole), without a traversal per point.
   struct Plan {
     std::vector<uint32_t> far, near;  ///< nodes
-    /// The far clusters again, four to a block in single precision, centers relative to `origin` (the ball's center):
-    /// what planned() reads. Unused lanes hold a cluster of no area far away (a zero term).
-    struct alignas(16) FarLanes {
-      float center[3][4], area[3][4], moment[6][4];  ///< [component][lane]
+    /// What planned() reads, eight lanes to a block (one AVX2 instruction each). The far clusters again in single
+    /// precision, centers relative to `origin` (the ball's center); unused lanes hold a cluster of no area far away (a
+    /// zero term).
+    struct alignas(32) FarLanes {
+      float center[3][8], area[3][8], moment[6][8];  ///< [component][lane]
     };
     std::vector<FarLanes> far_lanes;
+    /// The near leaves' triangles, two leaves to a block (lanes 0-3 and 4-7; an odd one out leaves 4-7 unused), as
+    /// each leaf keeps them: corners relative to its center, and the normal with its squared length.
+    struct alignas(32) NearLanes {
+      float corner[3][3][8], normal[4][8];  ///< [corner][axis][lane], [axis, then squared length][lane]
+      float near_corner[8];                 ///< the leaf's "p at a corner" threshold (kSureCorner2 times its radius^2)
+      int32_t used[8];                      ///< all bits set in a lane that holds a triangle
+      Vec3d center[2];                      ///< the two leaves' centers
+      uint32_t begin[2];                    ///< their first triangles
+    };
+    std::vector<NearLanes> near_lanes;
     Vec3d origin;
   };
   void plan(const Vec3d& center, double radius, Tier tier, Plan* plan) const;
