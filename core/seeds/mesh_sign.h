@@ -97,12 +97,12 @@ class MeshSign {
   /// triangles at the boundary, a soup of them) it takes every point to lie on a boundary curve and signs every voxel
   /// by its own query.
   static constexpr uint64_t maxBoundaryPieces(uint64_t triangles) { return triangles / 4 + 4096; }
-  /// The most bytes those pieces hold (each piece in a cell of its own at worst).
+  /// The most bytes those pieces hold.
   static constexpr uint64_t maxBoundaryPieceBytes(uint64_t triangles) {
     return maxBoundaryPieces(triangles) * kBytesPerBoundaryPiece;
   }
   /// A boundary piece with its share of the structures over them (core/seeds/internal/boundary_curves.h).
-  static constexpr uint64_t kBytesPerBoundaryPiece = 64 + 4 + 112 + 96;
+  static constexpr uint64_t kBytesPerBoundaryPiece = 64 + 112;
 
  private:
   struct Tables;

@@ -9,19 +9,9 @@
 namespace distband::seeds_internal {
 namespace {
 
-// Pieces no longer than half a cell, so that a piece lies within a quarter cell of the midpoint it is filed under; a
-// query searches the cells within kRings of its own and bounds everything farther by the rings' reach. Distances are
-// to the edges themselves: a long boundary edge passes far from its vertices.
-constexpr double kCell = 2 * BoundaryCurves::kPieceLength;
-constexpr int kRings = 2;
-constexpr size_t kBrutePieces = 256;  // this few: every query reads them all, exactly, without a cap
-constexpr uint32_t kGroup = 8;        // the distance's groups (few pieces)
-constexpr uint32_t kTurnLeaf = 2;     // the turn rate's tree: a leaf's ball is at most one piece long
+// Distances are to the edges themselves: a long boundary edge passes far from its vertices.
+constexpr uint32_t kTurnLeaf = 2;  // the tree's leaves: a leaf's ball is at most one piece long
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
-
-Coord cellOf(const Vec3d& p) {
-  return {int(std::floor(p.x / kCell)), int(std::floor(p.y / kCell)), int(std::floor(p.z / kCell))};
-}
 
 }  // namespace
 
@@ -64,16 +54,13 @@ void BoundaryCurves::build(std::span<const Vec3d> vertices, std::span<const Chai
   }
   if (pieces_.empty()) return;
   buildTree();  // reorders the pieces
-  if (pieces_.size() <= kBrutePieces) return;
-  for (size_t k = 0; k < pieces_.size(); ++k) cells_[cellOf(pieces_[k].a + pieces_[k].ab * 0.5)].push_back(uint32_t(k));
 }
 
 void BoundaryCurves::buildTree() {
-  // Each node's pieces halved along the longest extent of their midpoints, down to kTurnLeaf a leaf; with few pieces,
-  // the first nodes of kGroup pieces or fewer are also the distance's groups.
+  // Each node's pieces halved along the longest extent of their midpoints, down to kTurnLeaf a leaf.
   nodes_.reserve(2 * pieces_.size());
   const auto mid = [&](uint32_t k) { return pieces_[k].a + pieces_[k].ab * 0.5; };
-  const auto build = [&](const auto& self, uint32_t node, uint32_t begin, uint32_t end, bool in_group) -> void {
+  const auto build = [&](const auto& self, uint32_t node, uint32_t begin, uint32_t end) -> void {
     Vec3d lo = pieces_[begin].a, hi = lo, mid_lo = mid(begin), mid_hi = mid_lo;
     double net_length = 0;
     for (uint32_t k = begin; k < end; ++k) {
@@ -91,8 +78,6 @@ void BoundaryCurves::buildTree() {
     for (uint32_t k = begin; k < end; ++k)  // a piece is a segment: within the ball when both its ends are
       n.radius =
           std::max({n.radius, (pieces_[k].a - n.center).length(), (pieces_[k].a + pieces_[k].ab - n.center).length()});
-    const bool group = !in_group && end - begin <= kGroup && pieces_.size() <= kBrutePieces;
-    if (group) groups_.push_back(node);
     if (end - begin > kTurnLeaf) {
       const Vec3d e = mid_hi - mid_lo;
       const int axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
@@ -105,19 +90,17 @@ void BoundaryCurves::buildTree() {
                        [&](const Piece& x, const Piece& y) { return key(x) < key(y); });
       n.first_child = uint32_t(nodes_.size());
       nodes_.resize(nodes_.size() + 2);
-      self(self, n.first_child, begin, half, in_group || group);
-      self(self, n.first_child + 1, half, end, in_group || group);
+      self(self, n.first_child, begin, half);
+      self(self, n.first_child + 1, half, end);
     }
     nodes_[node] = n;
   };
   nodes_.resize(1);
-  build(build, 0, 0, uint32_t(pieces_.size()), false);
+  build(build, 0, 0, uint32_t(pieces_.size()));
 }
 
 uint64_t BoundaryCurves::memoryBytes() const {
-  return pieces_.capacity() * sizeof(Piece) + nodes_.capacity() * sizeof(Node) + groups_.capacity() * sizeof(uint32_t) +
-         cells_.size() * (sizeof(Coord) + 2 * sizeof(void*) + sizeof(std::vector<uint32_t>)) +
-         (cells_.empty() ? 0 : pieces_.size() * sizeof(uint32_t));
+  return pieces_.capacity() * sizeof(Piece) + nodes_.capacity() * sizeof(Node);
 }
 
 void BoundaryCurves::findNear(const Vec3d& center, double reach, Near* near) const {
@@ -156,46 +139,43 @@ void BoundaryCurves::findNear(const Vec3d& center, double reach, Near* near) con
       }
     }
   }
+  // The distance's pieces: the nearest, found in the tree (a node's ball bounds its pieces' distance from below; the
+  // nearer child first), then every piece within 2 reach of its distance: no other is anybody's nearest within reach.
   near->pieces.reserve(64);  // grown by doubling from one, it was several allocations a brick
-  // The distance's candidates: the pieces of the groups within `bound` of the center, or those filed within kRings
-  // cells. Read twice, the nearest first, so that only the pieces near it are kept (a brick far from a short boundary
-  // would keep all of it).
-  std::array<double, kBrutePieces> group_distance;  // to a group's center
-  double nearest_bound = kInfinity;                 // the nearest piece is at most this far
-  for (size_t g = 0; g < groups_.size(); ++g) {
-    const Node& group = nodes_[groups_[g]];
-    group_distance[g] = (center - group.center).length();
-    nearest_bound = std::min(nearest_bound, group_distance[g] + group.radius);
-  }
-  auto forEachCandidate = [&](double bound, auto&& visit) {
-    if (cells_.empty()) {
-      for (size_t g = 0; g < groups_.size(); ++g) {
-        const Node& group = nodes_[groups_[g]];
-        if (group_distance[g] - group.radius <= bound)
-          for (uint32_t k = group.begin; k < group.end; ++k) visit(k);
-      }
-      return;
-    }
-    const Coord home = cellOf(center);
-    for (int z = -kRings; z <= kRings; ++z)
-      for (int y = -kRings; y <= kRings; ++y)
-        for (int x = -kRings; x <= kRings; ++x) {
-          const auto it = cells_.find(Coord{home.x + x, home.y + y, home.z + z});
-          if (it == cells_.end()) continue;
-          for (uint32_t k : it->second) visit(k);
-        }
-  };
+  const auto lowerBound = [&](const Node& node) { return (center - node.center).length() - node.radius; };
   double best2 = kInfinity;
-  forEachCandidate(nearest_bound, [&](uint32_t k) { best2 = std::min(best2, pieces_[k].distance2(center)); });
-  // A piece not searched has its midpoint kRings cells away or more, and lies within half a piece of it.
-  if (!cells_.empty()) near->cap = kRings * kCell - kPieceLength / 2;
-  if (best2 == kInfinity) return;
-  // A piece farther from the center than the nearest by more than 2 reach is nobody's nearest within reach.
+  top = 0;
+  stack[size_t(top++)] = 0;
+  while (top > 0) {
+    const Node& node = nodes_[stack[size_t(--top)]];
+    const double lower = lowerBound(node);
+    if (lower > 0 && lower * lower >= best2) continue;
+    if (node.first_child != 0 && top + 2 <= int(stack.size())) {
+      const bool second_nearer = (center - nodes_[node.first_child + 1].center).lengthSqr() <
+                                 (center - nodes_[node.first_child].center).lengthSqr();
+      stack[size_t(top++)] = node.first_child + (second_nearer ? 0 : 1);
+      stack[size_t(top++)] = node.first_child + (second_nearer ? 1 : 0);
+    } else {
+      for (uint32_t k = node.begin; k < node.end; ++k) best2 = std::min(best2, pieces_[k].distance2(center));
+    }
+  }
   const double keep = std::sqrt(best2) + 2 * reach;
-  forEachCandidate(keep, [&](uint32_t k) {
-    const double d2 = pieces_[k].distance2(center);
-    if (d2 <= keep * keep) near->pieces.emplace_back(k, d2);
-  });
+  near->cap = keep;  // every piece left out is farther
+  top = 0;
+  stack[size_t(top++)] = 0;
+  while (top > 0) {
+    const Node& node = nodes_[stack[size_t(--top)]];
+    if (lowerBound(node) > keep) continue;
+    if (node.first_child != 0 && top + 2 <= int(stack.size())) {
+      stack[size_t(top++)] = node.first_child + 1;
+      stack[size_t(top++)] = node.first_child;
+    } else {
+      for (uint32_t k = node.begin; k < node.end; ++k) {
+        const double d2 = pieces_[k].distance2(center);
+        if (d2 <= keep * keep) near->pieces.emplace_back(k, d2);
+      }
+    }
+  }
 }
 
 double BoundaryCurves::distance(const Near& near, const Vec3d& p, double radius) const {

@@ -10,7 +10,6 @@
 #include <algorithm>
 #include <cstdint>
 #include <span>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -25,9 +24,8 @@ class BoundaryCurves {
   static constexpr double kFar = 1e6;
   /// The longest piece (frame units).
   static constexpr double kPieceLength = 16;
-  /// Bytes held a piece, at most: the piece (64), its id in its cell's list (4), fewer than two nodes of the tree
-  /// (112) and, at worst, a cell to itself (a hash node and a list, 96).
-  static constexpr uint64_t kBytesPerPiece = 64 + 4 + 112 + 96;
+  /// Bytes held a piece, at most: the piece (64) and fewer than two nodes of the tree (112).
+  static constexpr uint64_t kBytesPerPiece = 64 + 112;
 
   /// Cuts the chain's edges (vertex ids into `vertices`) into pieces of at most kPieceLength. Past `max_pieces`
   /// (long thin triangles at the boundary, a soup of them, would make pieces without bound) it keeps none and takes
@@ -86,7 +84,7 @@ class BoundaryCurves {
     double turn(double d, double rho) const;
   };
   /// A binary tree over the pieces: each node a ball around its pieces' range, with the sum of their |net| x length,
-  /// leaves of at most kTurnLeaf pieces.
+  /// leaves of at most kTurnLeaf pieces. The turn rate's far nodes and the distance's search both read it.
   struct Node {
     Vec3d center;
     double radius;
@@ -94,16 +92,12 @@ class BoundaryCurves {
     uint32_t begin, end;
     uint32_t first_child;  // the two children are first_child and first_child + 1; 0 for a leaf
   };
-  static_assert(sizeof(Piece) + sizeof(uint32_t) + 2 * sizeof(Node) <= 180, "kBytesPerPiece counts 64 + 4 + 112");
+  static_assert(sizeof(Piece) + 2 * sizeof(Node) <= kBytesPerPiece, "kBytesPerPiece counts 64 + 112");
 
   void buildTree();
 
   std::vector<Piece> pieces_;
   std::vector<Node> nodes_;  // the root first
-  /// Few pieces (no cells): the first nodes of at most kGroup pieces, so that a query reads the pieces of the groups
-  /// that can hold its nearest only.
-  std::vector<uint32_t> groups_;
-  std::unordered_map<Coord, std::vector<uint32_t>, CoordHash> cells_;  // many pieces: by the cell of their midpoint
   bool everywhere_ = false;
 };
 
