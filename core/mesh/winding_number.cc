@@ -69,12 +69,19 @@ constexpr float kSureCorner2 = 1e-4f;  // every corner at least 1/100 of the lea
 #define DISTBAND_AVX2_CLONE
 #endif
 // The lanes' helpers are always inlined: each runs in the instructions of the clone it is called from, and eight-lane
-// values never cross a call (whose convention for them differs with and without AVX: -Wpsabi's note).
+// values never cross a call (whose convention for them differs with and without AVX: -Wpsabi's note). Clang checks
+// that convention before it inlines and refuses an AVX2 clone's call to a helper compiled without AVX: its builds (the
+// sanitizers', the fuzzers') run the eight lanes without an AVX2 clone, as pairs of four (the same values).
 #if defined(__GNUC__) || defined(__clang__)
 #define DISTBAND_LANES [[gnu::always_inline]] inline
 #pragma GCC diagnostic ignored "-Wpsabi"
 #else
 #define DISTBAND_LANES inline
+#endif
+#if defined(__clang__)
+#define DISTBAND_AVX2_CLONE_EIGHT_LANES
+#else
+#define DISTBAND_AVX2_CLONE_EIGHT_LANES DISTBAND_AVX2_CLONE
 #endif
 using Float4 = float __attribute__((vector_size(16)));
 using Int4 = int32_t __attribute__((vector_size(16)));
@@ -482,7 +489,7 @@ void WindingNumber::plan(const Vec3d& center, double radius, Tier tier, Plan* pl
   }
 }
 
-DISTBAND_AVX2_CLONE double WindingNumber::plannedLanes(const Plan& plan, const Vec3d& p) const {
+DISTBAND_AVX2_CLONE_EIGHT_LANES double WindingNumber::plannedLanes(const Plan& plan, const Vec3d& p) const {
   // farTerm in single precision (each term is within a few 1e-7 of its own size), then the near leaves' half angles,
   // two leaves a block, summed lane by lane in double.
   const Vec3d q = p - plan.origin;
