@@ -388,7 +388,7 @@ int finishQuery(const RemoteQueryResult& result, QueryReceiver& rx, const Interr
     const bool deadline = watch.deadlinePassed() || result.status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
     if (deadline || canceller.cancelled()) {
       // The server stopped; keep every complete segment received (marked incomplete), drop the rest.
-      RunOutcome run{false, rx.committed_voxels, result.total_seconds};
+      RunOutcome run{false, rx.committed_voxels, result.total_seconds, {}};
       return finishStoppedRun(rx.outputs, run, deadline ? RunStop::kDeadline : RunStop::kInterrupted, "query", ctx);
     }
     ctx.err << "distband query: " << describe(result.status) << "\n";
@@ -406,7 +406,7 @@ int finishQuery(const RemoteQueryResult& result, QueryReceiver& rx, const Interr
       "client: first bricks after {:.3f}s, done after {:.3f}s\n",
       s.voxels(), s.bricks(), result.messages, result.wire_bytes / 1e6, s.seed_seconds(), s.compute_seconds(),
       s.total_seconds(), result.first_bricks_seconds, result.total_seconds);
-  RunOutcome run{true, int64_t(s.voxels()), s.total_seconds()};
+  RunOutcome run{true, int64_t(s.voxels()), s.total_seconds(), {}};
   const v1::SignShares& sh = s.sign_shares();
   run.sign_shares = {int64_t(sh.pseudonormal()), int64_t(sh.winding_certified()), int64_t(sh.winding_per_voxel()),
                      int64_t(sh.parity())};

@@ -99,7 +99,7 @@ template <class Half>
 DISTBAND_LANES auto joinLanes(Half first, Half second) {
   return __builtin_shufflevector(first, second, 0, 1, 2, 3, 4, 5, 6, 7);
 }
-using Int8 = decltype(joinLanes(Int4{}, Int4{}));
+using Int8 = decltype(Float8{} < Float8{});
 DISTBAND_LANES Float8 loadLanes8(const float* lanes) {
   Float8 v;
   std::memcpy(&v, lanes, sizeof(Float8));
@@ -189,24 +189,6 @@ const float* farRow(const Block& block, int row) {
 DISTBAND_LANES Float8 laneValue8(double v) { return Float8{} + float(v); }
 /// Four lanes of one value, in single precision (p's coordinates relative to a leaf's center, as its corners).
 Float4 laneValue(double v) { return Float4{} + float(v); }
-/// A leaf's sum of half solid angles from its lanes: the sure ones in lane order, then those unsure in double
-/// (`skip`: a lane left out, or none).
-double sumLeafLanes(const std::array<Vec3d, 3>* tris, uint32_t count, uint32_t skip, const Vec3d& p, Float4 angle,
-                    Int4 unsure) {
-  const Int4 lane = {0, 1, 2, 3};
-  const Int4 used = lane < int32_t(count) && lane != int32_t(skip);
-  const Float4 sure = used && !unsure ? angle : Float4{};
-  double sum = double(sure[0]) + double(sure[1]) + double(sure[2]) + double(sure[3]);
-  const Int4 redo = used && unsure;
-  if (redo[0] | redo[1] | redo[2] | redo[3])
-    for (uint32_t k = 0; k < 4; ++k)
-      if (redo[k]) {
-        const HalfAngle exact = halfAngle(tris[k], p);
-        sum += std::atan2(exact.num, exact.den);
-      }
-  return sum;
-}
-
 }  // namespace
 
 WindingNumber::WindingNumber(std::vector<std::array<Vec3d, 3>> triangles, double beta, const Interrupter* interrupter)
@@ -402,7 +384,19 @@ DISTBAND_AVX2_CLONE double WindingNumber::leafHalfAngles(const Node& n, const Ve
   const Vec3d q = p - n.center;
   const LeafHalfAngles<Float4> h([&](int row) { return loadLanes(leafRow(leaf, row)); },
                                  {laneValue(q.x), laneValue(q.y), laneValue(q.z)}, laneValue(kSureCorner2 * n.radius2));
-  return sumLeafLanes(&tris_[n.begin], n.end - n.begin, skip - n.begin, p, h.angle, h.unsure);
+  // The lanes in use: the leaf's triangles, `skip` left out.
+  const Int4 lane = {0, 1, 2, 3};
+  const Int4 used = lane < int32_t(n.end - n.begin) && lane != int32_t(skip - n.begin);
+  const Float4 sure = used && !h.unsure ? h.angle : Float4{};
+  double sum = double(sure[0]) + double(sure[1]) + double(sure[2]) + double(sure[3]);
+  const Int4 redo = used && h.unsure;
+  if (redo[0] | redo[1] | redo[2] | redo[3])
+    for (uint32_t k = 0; k < 4; ++k)
+      if (redo[k]) {
+        const HalfAngle exact = halfAngle(tris_[n.begin + k], p);
+        sum += std::atan2(exact.num, exact.den);
+      }
+  return sum;
 }
 
 namespace {

@@ -117,8 +117,9 @@ TEST_P(MeshWindowTest, AWindowReadsOnlyTheTrianglesInReachAndComputesWhatTheWhol
         const float a = part_field.at({x, y, z}), b = grid_field.at(box.min + Coord{x, y, z});
         if (std::isnan(a) || std::isnan(b)) continue;
         ++compared;
-        if (c.sign != SignMethod::kUnsigned && std::abs(b) > 0.5 * grid.voxelSize())
+        if (c.sign != SignMethod::kUnsigned && std::abs(b) > 0.5 * grid.voxelSize()) {
           ASSERT_EQ(std::signbit(a), std::signbit(b)) << "sign at " << x << "," << y << "," << z;
+        }
         const double exact = testing::bruteDistance(mesh, grid.worldOf(box.min + Coord{x, y, z}));
         worst = std::max(worst, std::abs(std::abs(double(a)) - exact) / grid.voxelSize());
       }
