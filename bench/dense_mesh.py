@@ -6,6 +6,7 @@ picked with a fixed seed): an open mesh as scans give them.
 
     bench/dense_mesh.py ../shared/data/meshes/armadillo.off --levels 3 --out /tmp/armadillo_3m.ply   # 3.33 M triangles
     bench/dense_mesh.py ../shared/data/meshes/bunny.obj --levels 0 --holes 8 --out /tmp/bunny_holes.ply
+    bench/dense_mesh.py ../shared/data/meshes/bunny.obj --levels 0 --holes 8 --out /tmp/bunny_holes.stl   # a soup
 """
 import argparse
 import random
@@ -80,6 +81,20 @@ def subdivide(vertices, triangles):
     return vertices, out
 
 
+def write_stl(path, vertices, triangles):
+    """Binary STL: a triangle soup (each triangle with its own three corners and its unit normal)."""
+    with open(path, "wb") as f:
+        f.write(b"distband bench/dense_mesh.py".ljust(80, b" "))
+        f.write(struct.pack("<I", len(triangles)))
+        for t in triangles:
+            a, b, c = (vertices[i] for i in t)
+            u = [b[k] - a[k] for k in range(3)]
+            v = [c[k] - a[k] for k in range(3)]
+            n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+            length = sum(x * x for x in n) ** 0.5 or 1.0
+            f.write(struct.pack("<12fH", *(x / length for x in n), *a, *b, *c, 0))
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("mesh")
@@ -93,6 +108,10 @@ def main():
         vertices, triangles = subdivide(vertices, triangles)
     if a.holes:
         triangles = punch_holes(vertices, triangles, a.holes, a.hole_radius)
+    if a.out.endswith(".stl"):
+        write_stl(a.out, vertices, triangles)
+        print(f"{a.out}: a soup of {len(triangles)} triangles")
+        return
     with open(a.out, "wb") as f:
         f.write(("ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
                  "property float z\nelement face %d\nproperty list uchar int vertex_indices\nend_header\n"
