@@ -177,6 +177,41 @@ TEST(WindingNumberTest, PlansStayWithinTheirTiersErrorInTheirBall) {
   }
 }
 
+// A plan made for a ball of radius 0 at p lists the clusters its tier's query takes at p, and its evaluation (far
+// clusters eight lanes to a block, near leaves two to a block, an odd one out alone) gives the query's value up to
+// single precision: points near the surface, on vertices, edges and faces (unsure lanes), of both meshes; near-leaf
+// counts odd and even, leaves of 2-4 triangles.
+TEST(WindingNumberTest, APlanAtAPointGivesItsTiersQuery) {
+  for (const char* name : {"teapot.obj", "bunny.obj"}) {
+    SCOPED_TRACE(name);
+    const std::vector<std::array<Vec3d, 3>> tris = openMeshIn500Box(name);
+    ASSERT_FALSE(tris.empty());
+    const WindingNumber wn(tris);
+    std::mt19937 rng(5);
+    std::vector<Vec3d> points;
+    for (int i = 0; i < 300; ++i) points.push_back(nearSurface(tris, rng));
+    for (size_t t = 0; t < tris.size(); t += 53)
+      points.insert(points.end(), {tris[t][0], (tris[t][0] + tris[t][1]) * 0.5,
+                                   (tris[t][0] + tris[t][1] + tris[t][2]) * (1.0 / 3.0)});
+    const struct {
+      WindingNumber::Tier tier;
+      double (WindingNumber::*query)(const Vec3d&) const;
+    } tiers[] = {{WindingNumber::Tier::kFine, &WindingNumber::query},
+                 {WindingNumber::Tier::kCoarse, &WindingNumber::coarseQuery},
+                 {WindingNumber::Tier::kRough, &WindingNumber::roughQuery}};
+    int odd = 0, even = 0;
+    WindingNumber::Plan plan;
+    for (const auto& tier : tiers)
+      for (const Vec3d& p : points) {
+        wn.plan(p, 0, tier.tier, &plan);
+        (plan.near.size() % 2 ? odd : even) += 1;
+        ASSERT_NEAR(wn.planned(plan, p), (wn.*tier.query)(p), 2e-5) << p.x << "," << p.y << "," << p.z;
+      }
+    EXPECT_GT(odd, 0);
+    EXPECT_GT(even, 0);
+  }
+}
+
 // The boundary fans (core/mesh/winding_number.h: boundaryFans) have the mesh's boundary, so the mesh's exact winding
 // number minus theirs is an integer everywhere off both (the brute oracle of tests/support for both sums). Meshes: the
 // teapot (open, three parts), a bunny with every 40th face removed, a closed bunny (no boundary, no fans), an open
