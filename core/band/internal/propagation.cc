@@ -375,30 +375,47 @@ bool gatherLists(BandState& s, FrontList& to, FrontList ThreadBuffers::*field, E
 
 }  // namespace
 
-FrontList gatherFront(BandState& s) {
-  FrontList front;
-  if (s.stopping()) return front;  // the run ends: no need to copy the partial buffers
+void gatherFront(BandState& s, FrontList& front) {
+  // The last front's storage is reused (its pages are touched already: a fresh page's first touch costs more than
+  // the copy into it, ~3 ms a MiB on some virtual machines); grown, it is given back first rather than copied.
+  front.clear();
+  if (s.stopping()) return;  // the run ends: no need to copy the partial buffers
+  size_t n = 0;
+  for (auto& tb : s.buffers) n += tb.next.size();
+  if (front.capacity() < n) FrontList().swap(front);
   // Snapshot each changed voxel's site as of the end of the step: the next step offers exactly these.
-  const bool ok = gatherLists(s, front, &ThreadBuffers::next, [&](const FrontEntry& e, FrontEntry& out) {
-    BrickState* b = s.table.get(e.brick);
-    const uint64_t k = b->key[e.offset].load(std::memory_order_relaxed);
-    // Every bit set in this word belongs to an entry of this front, so the whole word is cleared with a plain store
-    // (threads clearing the same word all store 0): an atomic AND per entry was ~1/4 of the gather's time.
-    b->listed.words[e.offset >> 6].store(0, std::memory_order_relaxed);
-    out = {e.brick, e.offset, uint8_t(keyDir(k)), keySite(k)};
-  }, [](FrontList& list) {
-    // A large buffer is given back rather than kept for the next step: the initial band's front can be tens of
-    // MB, and later fronts are mostly much smaller (regrowing costs little next to the pushes that fill it).
-    if (list.capacity() > 65536) FrontList().swap(list);
-    list.clear();
-  });
-  if (!ok) return FrontList();
-  const size_t n = front.size();
-  // The next front is usually about this one's size: one buffer of that size per thread instead of a chain of
-  // doublings, whose freed links would stay behind as heap holes.
-  const size_t share = n / std::max<size_t>(1, s.buffers.size()) + 4096;
-  for (auto& tb : s.buffers) tb.next.reserve(share);
-  return front;
+  const bool ok = gatherLists(
+      s, front, &ThreadBuffers::next,
+      [&](const FrontEntry& e, FrontEntry& out) {
+        BrickState* b = s.table.get(e.brick);
+        const uint64_t k = b->key[e.offset].load(std::memory_order_relaxed);
+        // Every bit set in this word belongs to an entry of this front, so the whole word is cleared with a plain store
+        // (threads clearing the same word all store 0): an atomic AND per entry was ~1/4 of the gather's time.
+        b->listed.words[e.offset >> 6].store(0, std::memory_order_relaxed);
+        out = {e.brick, e.offset, uint8_t(keyDir(k)), keySite(k)};
+      },
+      [](FrontList& list) { list.clear(); });  // its storage kept for the next step (releaseFronts gives it back)
+  if (!ok) {
+    front.clear();
+    return;
+  }
+  // The next front is usually about this one's size: room for half as much again per thread (address space only
+  // until written), instead of a chain of doublings whose copies touch fresh pages.
+  reserveNext(s, n + n / 2);
+}
+
+void reserveNext(BandState& s, size_t entries) {
+  const size_t share = entries / std::max<size_t>(1, s.buffers.size()) + 4096;
+  for (auto& tb : s.buffers) {
+    if (tb.next.capacity() >= share) continue;
+    FrontList().swap(tb.next);  // empty: nothing to copy
+    tb.next.reserve(share);
+  }
+}
+
+void releaseFronts(BandState& s, FrontList& front) {
+  FrontList().swap(front);
+  for (auto& tb : s.buffers) FrontList().swap(tb.next);
 }
 
 bool collectDeferred(BandState& s) {

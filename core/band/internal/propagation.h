@@ -33,8 +33,13 @@ void insertBand(BandState& s);
 void stepFromBand(BandState& s);
 /// One step: every entry of `front` pushes.
 void step(BandState& s, const FrontList& front);
-/// The voxels changed in the last step, each with its site and arrival direction as of now (the next front).
-FrontList gatherFront(BandState& s);
+/// The voxels changed in the last step, each with its site and arrival direction as of now: the next front, written
+/// over `front` (whose storage is reused, as are the threads' lists it empties). Empty when the run must stop.
+void gatherFront(BandState& s, FrontList& front);
+/// Room for `entries` in the threads' next lists together (each thread a share), kept if they have it.
+void reserveNext(BandState& s, size_t entries);
+/// Gives back the storage gatherFront keeps between steps: `front`'s and the threads' next lists'.
+void releaseFronts(BandState& s, FrontList& front);
 /// Moves the threads' held-back offers into BandState::deferred; false when the run must stop.
 bool collectDeferred(BandState& s);
 /// Held-back offers (this step's and earlier ones) as the next front. Not deduplicated: an offer two threads made

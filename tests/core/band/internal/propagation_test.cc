@@ -80,7 +80,8 @@ TEST(Propagation, OneStepReachesEveryNeighbourAcrossBricks) {
   BandState s(f.grid, f.seeds, f.opt);
   s.admit2 = INFINITY;
   insertBand(s);
-  FrontList front = gatherFront(s);
+  FrontList front;
+  gatherFront(s, front);
   ASSERT_EQ(front.size(), 1u);
   EXPECT_EQ(front[0].site, 0u);
   EXPECT_EQ(front[0].dir, kNoDirection);
@@ -98,11 +99,29 @@ TEST(Propagation, OneStepReachesEveryNeighbourAcrossBricks) {
         }
       }
   EXPECT_EQ(s.keyAt({site.x + 2, site.y, site.z}), kUntouched);
-  front = gatherFront(s);
+  // The next front is written over the last one, in its storage when that is large enough.
+  front.reserve(64);
+  const FrontEntry* const storage = front.data();
+  gatherFront(s, front);
   EXPECT_EQ(front.size(), 26u);
+  EXPECT_EQ(front.data(), storage);
+  for (const FrontEntry& e : front) {
+    EXPECT_EQ(e.site, 0u);
+    EXPECT_NE(e.dir, kNoDirection);
+  }
   int64_t bricks = 0;
   for (auto& tb : s.buffers) bricks += tb.bricks;
   EXPECT_EQ(bricks, 8);
+  // The threads' next lists were emptied and keep their storage until releaseFronts.
+  size_t kept = 0;
+  for (auto& tb : s.buffers) {
+    EXPECT_TRUE(tb.next.empty());
+    kept += tb.next.capacity();
+  }
+  EXPECT_GE(kept, 26u);
+  releaseFronts(s, front);
+  EXPECT_EQ(front.capacity(), 0u);
+  for (auto& tb : s.buffers) EXPECT_EQ(tb.next.capacity(), 0u);
 }
 
 TEST(Propagation, OffersBeyondTheAdmissionAreHeldBackAndReplayed) {
@@ -111,7 +130,9 @@ TEST(Propagation, OffersBeyondTheAdmissionAreHeldBackAndReplayed) {
   s.admit2 = 1.5f;  // axial neighbours (1) are admitted, diagonal ones (2, 3) are not
   s.defer = true;
   insertBand(s);
-  step(s, gatherFront(s));
+  FrontList front;
+  gatherFront(s, front);
+  step(s, front);
   EXPECT_NE(s.keyAt({13, 12, 12}), kUntouched);
   EXPECT_EQ(s.keyAt({13, 13, 12}), kUntouched);
   FrontList replay = takeDeferred(s);
