@@ -55,6 +55,10 @@ Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, const Dis
     }
   }
   const Vec3d ext = hi - lo;
+  // Finite corners can still be farther apart than a double holds (-1e308 to 1e308): the sizes below would be NaN.
+  if (!std::isfinite(ext.x) || !std::isfinite(ext.y) || !std::isfinite(ext.z))
+    return Status::InvalidArgument(o.box_min ? "the box's corners are too far apart (its extent overflows)"
+                                             : "the mesh's vertices are too far apart (its extent overflows)");
   const double longest = std::max({ext.x, ext.y, ext.z});
   if (o.resolution > kMaxGridDim) return Status::InvalidArgument(fmt::format("resolution must be <= {} (got {})", kMaxGridDim, o.resolution));
   GridPadding padding;
@@ -73,6 +77,9 @@ Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, const Dis
                          padding.voxels));
     if (!(longest > 0)) return Status::InvalidArgument("the box has zero extent, so a resolution cannot size it (give a voxel size)");
     h = longest / span;
+    if (!(h > 0))  // a subnormal extent: the voxel size underflows to 0
+      return Status::InvalidArgument(
+          fmt::format("the bounds' extent {:g} is too small to be split into {} voxels", longest, span));
   }
   if (!o.box_min) {
     const double limit_voxels = limit.voxels > 0 ? limit.voxels : limit.world / h;
@@ -85,7 +92,7 @@ Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, const Dis
     return cells + 1 + 2 * pad;
   };
   const double nx = count(ext.x), ny = count(ext.y), nz = count(ext.z);
-  if (std::max({nx, ny, nz}) > kMaxGridDim)
+  if (!(nx <= kMaxGridDim && ny <= kMaxGridDim && nz <= kMaxGridDim))  // also NaN (a tiny voxel and a huge box)
     return Status::InvalidArgument(fmt::format(
         "the grid would be {:.0f}x{:.0f}x{:.0f} voxels; at most {} per axis are allowed", nx, ny, nz, kMaxGridDim));
   Grid g(lo - Vec3d{pad * h, pad * h, pad * h}, h, {int(nx), int(ny), int(nz)});

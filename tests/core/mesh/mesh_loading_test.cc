@@ -428,5 +428,33 @@ TEST(MeshGridTest, RejectsBadOptions) {
   EXPECT_TRUE(IsError(gridForMesh(mesh, box, {}, &g), Status::Code::kInvalidArgument, "max corner must be >= its min"));
 }
 
+// Finite numbers whose differences or quotients are not: each once turned a voxel count into NaN, then into an int
+// (undefined behaviour, found by the query fuzzer with a box from -1.8e308 to 1).
+TEST(MeshGridTest, RejectsBoundsWhoseSizesOverflowOrUnderflow) {
+  TriangleMesh mesh{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}};
+  Grid g;
+  for (const bool by_voxel_size : {false, true}) {
+    MeshGridOptions wide;
+    if (by_voxel_size)
+      wide.voxel_size = 1;
+    else
+      wide.resolution = 64;
+    wide.box_min = Vec3d{-1, -1, -1.7e308};
+    wide.box_max = Vec3d{1, 1, 1.7e308};
+    EXPECT_TRUE(
+        IsError(gridForMesh(mesh, wide, {}, &g), Status::Code::kInvalidArgument, "box's corners are too far apart"));
+  }
+  const TriangleMesh far{{{0, 0, -1.7e308}, {1, 0, 1.7e308}, {0, 1, 0}}, {{0, 1, 2}}};
+  MeshGridOptions by_resolution;
+  by_resolution.resolution = 64;
+  EXPECT_TRUE(IsError(gridForMesh(far, by_resolution, {}, &g), Status::Code::kInvalidArgument,
+                      "mesh's vertices are too far apart"));
+  MeshGridOptions subnormal;
+  subnormal.resolution = 1000;
+  subnormal.box_min = Vec3d{0, 0, 0};
+  subnormal.box_max = Vec3d{5e-324, 0, 0};
+  EXPECT_TRUE(IsError(gridForMesh(mesh, subnormal, {}, &g), Status::Code::kInvalidArgument, "too small to be split"));
+}
+
 }  // namespace
 }  // namespace distband
