@@ -92,7 +92,8 @@ Status gridForMesh(const TriangleMesh& mesh, const MeshGridOptions& o, const Dis
     return cells + 1 + 2 * pad;
   };
   const double nx = count(ext.x), ny = count(ext.y), nz = count(ext.z);
-  if (!(nx <= kMaxGridDim && ny <= kMaxGridDim && nz <= kMaxGridDim))  // also NaN (a tiny voxel and a huge box)
+  // Written so that a NaN fails it too, should one get past the checks above.
+  if (!(nx <= kMaxGridDim && ny <= kMaxGridDim && nz <= kMaxGridDim))
     return Status::InvalidArgument(fmt::format(
         "the grid would be {:.0f}x{:.0f}x{:.0f} voxels; at most {} per axis are allowed", nx, ny, nz, kMaxGridDim));
   Grid g(lo - Vec3d{pad * h, pad * h, pad * h}, h, {int(nx), int(ny), int(nz)});
