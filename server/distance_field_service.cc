@@ -278,6 +278,13 @@ Status DistanceFieldService::parseMeshAdmitted(grpc::ServerContext* context, Act
                          });
 }
 
+Status DistanceFieldService::cacheUpload(const std::shared_ptr<const Asset>& asset, std::string_view field,
+                                         std::string_view what) {
+  if (cache_.insert(asset)) return Status::Ok();
+  return Status::ResourceExhausted(fmt::format("{}: {} needs {} bytes, more than the whole asset cache ({} bytes)",
+                                               field, what, asset->memoryBytes(), cache_.capacityBytes()));
+}
+
 grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
                                               grpc::ServerReader<v1::UploadMeshChunk>* reader,
                                               v1::UploadReply* reply) {
@@ -318,10 +325,7 @@ grpc::Status DistanceFieldService::UploadMesh(grpc::ServerContext* context,
       status = parseMeshAdmitted(context, *call, data, h.format(), h.name(), "UploadMeshChunk.data", &asset,
                                  &parse_seconds);
       if (parse_seconds >= 0) metrics_.uploadParsed(Rpc::kUploadMesh, parse_seconds);
-      if (status.ok() && !cache_.insert(asset))
-        status = Status::ResourceExhausted(
-            fmt::format("UploadMeshChunk.data: the parsed mesh needs {} bytes, more than the whole asset cache ({} bytes)",
-                        asset->memoryBytes(), cache_.capacityBytes()));
+      if (status.ok()) status = cacheUpload(asset, "UploadMeshChunk.data", "the parsed mesh");
     }
   }
   if (status.ok()) {
@@ -412,10 +416,7 @@ grpc::Status DistanceFieldService::UploadVolume(grpc::ServerContext* context,
                                  return s;
                                });
       if (parse_seconds >= 0) metrics_.uploadParsed(Rpc::kUploadVolume, parse_seconds);
-      if (status.ok() && !cache_.insert(asset))
-        status = Status::ResourceExhausted(
-            fmt::format("UploadVolumeChunk.data: the volume needs {} bytes, more than the whole asset cache ({} bytes)",
-                        asset->memoryBytes(), cache_.capacityBytes()));
+      if (status.ok()) status = cacheUpload(asset, "UploadVolumeChunk.data", "the volume");
     }
   }
   if (status.ok()) {

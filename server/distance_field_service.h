@@ -130,6 +130,9 @@ class DistanceFieldService final : public v1::DistanceField::Service {
   Status parseMeshAdmitted(grpc::ServerContext* context, ActiveCalls::Call& call, std::string_view bytes,
                            v1::MeshFormat format, const std::string& name, std::string_view field,
                            std::shared_ptr<const Asset>* asset, double* parse_seconds);
+  /// Puts a parsed upload into the asset cache; RESOURCE_EXHAUSTED naming `field` when `what` (e.g. "the volume") is
+  /// larger than the whole cache.
+  Status cacheUpload(const std::shared_ptr<const Asset>& asset, std::string_view field, std::string_view what);
   Status runQuery(grpc::ServerContext* context, ActiveCalls::Call& call, const v1::QueryRequest& request,
                   grpc::ServerWriter<v1::QueryReply>* writer, const RequestId& request_id, QueryRecord* record);
   /// An upload's reports to Metrics when its handler ends.

@@ -534,6 +534,28 @@ TEST(ServiceTest, UploadLimitsAreEnforced) {
   EXPECT_TRUE(s.ok()) << s.error_message();
 }
 
+TEST(ServiceTest, AnUploadLargerThanTheWholeCacheIsRefusedNamingTheField) {
+  ServerOptions o = TestServer::defaults();
+  o.cache_bytes = 256;  // below any parsed asset
+  TestServer ts(o);
+  v1::UploadReply up;
+  grpc::Status s =
+      ts.client().uploadVolumeBytes({10, 10, 9}, v1::VOXEL_TYPE_UINT8, std::vector<uint8_t>(900, 1), "v", &up);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
+  EXPECT_NE(s.error_message().find("UploadVolumeChunk.data: the volume needs "), std::string::npos)
+      << s.error_message();
+  EXPECT_NE(s.error_message().find("more than the whole asset cache (256 bytes)"), std::string::npos)
+      << s.error_message();
+  const std::string obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n";
+  s = ts.client().uploadMesh(obj, v1::MESH_FORMAT_OBJ, "tetra", &up);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
+  EXPECT_NE(s.error_message().find("UploadMeshChunk.data: the parsed mesh needs "), std::string::npos)
+      << s.error_message();
+  EXPECT_EQ(ts.server().service().cache().usedBytes(), 0u);  // nothing half-kept
+  v1::ServerInfo info;
+  EXPECT_TRUE(ts.client().info(&info).ok());  // still serving
+}
+
 bool fieldEquals(const DenseField& got, const std::vector<Vec3d>& pts, const Grid& grid, double segment,
                  double limit) {
   Seeds seeds;
