@@ -66,7 +66,7 @@ void giveBackFreeHeap() {
 }
 
 FieldRunResult runEngine(const Grid& grid, const Seeds& seeds, const BandOptions& options,
-                       const SegmentCallback& on_segment, std::vector<BandVoxel>* owned_band) {
+                         const SegmentCallback& on_segment, BandVoxels* owned_band) {
   if (Status s = validateBandOptions(grid, options); !s.ok()) throw std::invalid_argument(s.message());
   if (seeds.region && seeds.region->size() != size_t(grid.voxelCount()))
     throw std::invalid_argument("seeds.region must hold one label per grid voxel");

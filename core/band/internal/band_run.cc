@@ -22,7 +22,7 @@ constexpr size_t kBucketMinSites = 256;
 }  // namespace
 
 BandRun::BandRun(const Grid& grid, const Seeds& seeds, const BandOptions& opt, const SegmentCallback& cb,
-                 std::vector<BandVoxel>* owned_band)
+                 BandVoxels* owned_band)
     : state_(grid, seeds, opt), cb_(cb), owned_band_(owned_band) {}
 
 BandRun::~BandRun() { releaseBricks(state_); }
@@ -50,7 +50,7 @@ FieldRunResult BandRun::run() {
   const bool push_band = s.seeds.band_exact;  // first step from the band list, in segment 0 (below)
   FrontList front;
   auto releaseBand = [&] {
-    if (owned_band_) std::vector<BandVoxel>().swap(*owned_band_);
+    if (owned_band_) BandVoxels().swap(*owned_band_);
   };
   if (!push_band) {
     releaseBand();

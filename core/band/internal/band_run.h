@@ -15,7 +15,7 @@ class BandRun {
  public:
   /// `owned_band`: seeds.band when the caller handed the seeds over (freed once inserted), else null.
   BandRun(const Grid& grid, const Seeds& seeds, const BandOptions& opt, const SegmentCallback& cb,
-          std::vector<BandVoxel>* owned_band);
+          BandVoxels* owned_band);
   ~BandRun();
 
   FieldRunResult run();
@@ -23,7 +23,7 @@ class BandRun {
  private:
   BandState state_;
   const SegmentCallback& cb_;
-  std::vector<BandVoxel>* owned_band_;
+  BandVoxels* owned_band_;
 };
 
 }  // namespace distband::band_internal
