@@ -14,9 +14,11 @@
 namespace distband {
 namespace {
 
-// The first slab holds a few leaves (small fields stay small); later ones are 2 MiB, aligned and advised to use huge
-// pages: a leaf's first touch was otherwise a 4 KiB page fault of its own (~30 % of the page faults of a 512^3 mesh
-// run writing a .vdb, ~13 µs each on some virtual machines).
+// The first slab holds a few leaves (small fields stay small); later ones are one 2 MiB huge page each, mapped on
+// their own (mapHugeAligned): a leaf's first touch was otherwise a 4 KiB page fault of its own (~30 % of the page
+// faults of a 512^3 mesh run writing a .vdb, ~13 µs each on some virtual machines). They came from malloc as
+// 2 MiB-aligned blocks before, whose split-off ends put headers in pages of their own: in the CLI's huge-page heap
+// (client/batch_heap.h) each slab took a second huge page (a 512^3 teapot's 22 MiB of leaves raised RSS by 42 MiB).
 constexpr size_t kFirstSlabLeaves = 256;
 
 Coord alignDown(const Coord& c, int dim) { return {c.x & ~(dim - 1), c.y & ~(dim - 1), c.z & ~(dim - 1)}; }
@@ -125,11 +127,13 @@ typename VdbTree<T>::Leaf* VdbTree<T>::touchLeaf(const Coord& origin, bool* crea
   if (!inserted) return it->second;
   if (slabs_.empty() || slab_used_ == slab_size_) {
     // Raw storage: each leaf is made by initLeaf, on whichever thread fills it.
-    static_assert(kSlabAlign == kHugePageBytes && kSlabAlign % alignof(Leaf) == 0);
-    slab_size_ = slabs_.empty() ? kFirstSlabLeaves : kHugePageBytes / sizeof(Leaf);
-    const size_t bytes = slabs_.empty() ? slab_size_ * sizeof(Leaf) : kHugePageBytes;  // advice covers whole pages
-    slabs_.emplace_back(static_cast<Leaf*>(::operator new(bytes, std::align_val_t(kSlabAlign))));
-    adviseHugePages(slabs_.back().get(), bytes);
+    static_assert(kHugePageBytes % alignof(Leaf) == 0);
+    const bool first = slabs_.empty();
+    slab_size_ = first ? kFirstSlabLeaves : kHugePageBytes / sizeof(Leaf);
+    if (first)
+      slabs_.emplace_back(static_cast<Leaf*>(::operator new(slab_size_ * sizeof(Leaf))), SlabDelete{false});
+    else
+      slabs_.emplace_back(static_cast<Leaf*>(mapHugeAligned(kHugePageBytes)), SlabDelete{true});
     slab_used_ = 0;
   }
   Leaf* leaf = slabs_.back().get() + slab_used_++;

@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "core/brick.h"
+#include "core/first_touch.h"
 #include "core/types.h"
 
 namespace distband {
@@ -101,9 +102,15 @@ class VdbTree {
 
   T background_;
   bool sealed_ = false;
-  static constexpr size_t kSlabAlign = size_t(2) << 20;
+  // A slab: the first, small one from the heap; the others one 2 MiB huge page each, mapped on their own.
   struct SlabDelete {
-    void operator()(Leaf* p) const { ::operator delete(p, std::align_val_t(kSlabAlign)); }
+    bool mapped = false;
+    void operator()(Leaf* p) const {
+      if (mapped)
+        unmapHugeAligned(p, kHugePageBytes);
+      else
+        ::operator delete(p);
+    }
   };
   std::vector<std::unique_ptr<Leaf, SlabDelete>> slabs_;  // leaves, allocated in slabs of raw storage
   size_t slab_used_ = 0;
