@@ -13,7 +13,8 @@ namespace distband::band_internal {
 
 class BandRun {
  public:
-  /// `owned_band`: seeds.band when the caller handed the seeds over (freed once inserted), else null.
+  /// `owned_band`: seeds.band when the caller handed the seeds over, else null; freed as soon as the engine no longer
+  /// reads it (after the insertion, or after the first step for an exact band, whose first step pushes from it).
   BandRun(const Grid& grid, const Seeds& seeds, const BandOptions& opt, const SegmentCallback& cb,
           BandVoxels* owned_band);
   ~BandRun();
