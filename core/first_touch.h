@@ -1,8 +1,8 @@
 // Fresh storage for a parallel fill: page first touches in parallel (touchPages), an allocator mixin and allocator
 // that leave new elements unset (DefaultInitConstruct, NoInitAllocator), bricks made without values
 // (appendUnsetBricks), the advice that large storage use transparent huge pages (adviseHugePages), storage mapped on
-// its own in huge pages (mapHugeAligned; MappedAllocator for scratch arrays) and one thread's arena of small runs in
-// such chunks (ChunkArena).
+// its own in huge pages (mapHugeAligned; MappedAllocator for scratch arrays), the pages of storage already read given
+// back early (giveBackHugePages) and one thread's arena of small runs in such chunks (ChunkArena).
 // touchPages: the first write to each page of fresh storage, in parallel on the caller's TBB arena.
 // Why: a page's first touch is a page fault (~2-10 µs on virtual machines, ~13 µs on some), and a container's
 // zero-fill or construction loop takes them all on one thread; for storage of a megabyte or more that was a serial
@@ -66,6 +66,15 @@ inline void* mapHugeAligned(size_t bytes) {
   return reinterpret_cast<void*>(begin);
 }
 inline void unmapHugeAligned(void* p, size_t bytes) { ::munmap(p, roundUpToHugePage(bytes)); }
+
+/// Gives the whole 2 MiB pages inside [p, p + bytes) back to the system while their storage stays allocated: for
+/// storage read once, front to back, whose rest is still to be read. Their contents are lost (reads give zeros);
+/// the pages around the range are left as they are (none are split). Memory the caller owns.
+inline void giveBackHugePages(void* p, size_t bytes) {
+  const uintptr_t begin = roundUpToHugePage(reinterpret_cast<uintptr_t>(p));
+  const uintptr_t end = roundDownToHugePage(reinterpret_cast<uintptr_t>(p) + bytes);
+  if (begin < end) ::madvise(reinterpret_cast<void*>(begin), end - begin, MADV_DONTNEED);
+}
 
 inline void touchPages(void* p, size_t bytes) {
   constexpr size_t kPage = 4096;

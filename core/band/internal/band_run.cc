@@ -93,7 +93,7 @@ FieldRunResult BandRun::run() {
       if (s.opt.on_step) s.opt.on_step(s.step, s.seeds.band.size());
       // Its next front is ~40 % of the band (meshes at half-width 3 and 20).
       reserveNext(s, s.seeds.band.size() * 3 / 4);
-      stepFromBand(s);
+      stepFromBand(s, owned_band_ != nullptr);
       releaseBand();
       gatherFront(s, front);
     }

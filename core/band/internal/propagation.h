@@ -29,8 +29,9 @@ void pushFrom(BandState& s, const FrontEntry& e, ThreadBuffers& tb);
 /// Step 0: writes the band's keys (voxels beyond the limit's admission are skipped). Throws std::invalid_argument
 /// for band voxels outside the grid or naming a site out of range, or too many sites.
 void insertBand(BandState& s);
-/// The first step of an exact band, pushed from the band list itself.
-void stepFromBand(BandState& s);
+/// The first step of an exact band, pushed from the band list itself. With `give_back_band` (the caller owns the band
+/// and frees it after this step) the band's pages are given back as they are read: nothing may read it afterwards.
+void stepFromBand(BandState& s, bool give_back_band);
 /// One step: every entry of `front` pushes.
 void step(BandState& s, const FrontList& front);
 /// The voxels changed in the last step, each with its site and arrival direction as of now: the next front, written
