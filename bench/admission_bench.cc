@@ -231,7 +231,7 @@ int run(int argc, char** argv) {
   }
   md << fmt::format("\n{}\n", all_under ? "Every measured peak is below its estimate."
                                         : "**Some measured peak exceeds its estimate.**");
-  if (!smoke) std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md.str();
+  if (!smoke) distband::bench::writeResultFile(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md", md.str());
   return all_under ? 0 : 3;
 }
 

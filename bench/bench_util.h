@@ -1,6 +1,7 @@
 // Helpers shared by the benchmark programs: a steady clock and seconds since a time point, the median of timings,
 // peak RSS of this process, running a child command (tests/support/run_command.h), reading the peak RSS that
-// `/usr/bin/time -v` reports for it, and the seed and label volumes the benches share. Header-only; bench code only.
+// `/usr/bin/time -v` reports for it, writing a results file, and the seed and label volumes the benches share.
+// Header-only; bench code only.
 #pragma once
 
 #include <sys/resource.h>
@@ -12,6 +13,8 @@
 #include <cstring>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <optional>
 #include <random>
 #include <string>
@@ -30,6 +33,20 @@ using Clock = std::chrono::steady_clock;
 
 /// Seconds from `t` to now.
 inline double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+/// Writes a results file (a bench's Markdown table), making its folder first; a failure is said on stderr (a missing
+/// --out-dir folder used to drop the table without a word). False on failure.
+inline bool writeResultFile(const std::string& path, const std::string& text) {
+  const std::filesystem::path p(path);
+  std::error_code ec;
+  if (p.has_parent_path()) std::filesystem::create_directories(p.parent_path(), ec);
+  std::ofstream out(p, std::ios::binary);
+  out << text;
+  out.close();
+  if (out) return true;
+  std::fprintf(stderr, "cannot write %s\n", path.c_str());
+  return false;
+}
 
 /// Median of a non-empty sample (the mean of the middle two for an even count).
 inline double median(std::vector<double> v) {

@@ -276,7 +276,7 @@ int run(int argc, char** argv) {
   md += fmt::format("\nWorst compute stop: {:.1f} ms (goal: at most 100 ms); worst return with the state freed: {:.1f} ms.\n",
                     worst, worst_return);
   std::printf("\nWorst compute stop: %.1f ms; worst return: %.1f ms\n", worst, worst_return);
-  if (!smoke) std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md;
+  if (!smoke) distband::bench::writeResultFile(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md", md);
   return worst <= 100 ? 0 : 3;
 }
 

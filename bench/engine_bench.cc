@@ -771,7 +771,7 @@ void writeOutputs(const DriverOptions& o, const std::vector<json>& rows, const j
     if (g == "table1") md += "Against the paper's Table 1 (seconds):\n\n" + paperComparison(rows, o.threads) + "\n";
     if (g == "memory") md += "Scaling (time ∝ voxels within the limit):\n\n" + memoryTable(rows) + "\n";
   }
-  std::ofstream(base + ".md") << md;
+  distband::bench::writeResultFile(base + ".md", md);
 }
 
 std::string shellQuote(const std::string& s) {

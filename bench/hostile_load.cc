@@ -261,7 +261,7 @@ int run(int argc, char** argv) {
     md += fmt::format("| {} | {} |\n", kind, c);
   }
   std::printf("%s", md.c_str());
-  if (!smoke) std::ofstream(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md") << md;
+  if (!smoke) distband::bench::writeResultFile(std::string(DISTBAND_BENCH_DIR) + "/results/" + tag + ".md", md);
   if (tally.compared == 0) verdict.fail("maximal queries", "none completed, so none was checked");
   if (tally.identical != tally.compared)
     verdict.fail("maximal queries", fmt::format("{} of {} completed queries differ from the reference; first: {}",

@@ -673,7 +673,7 @@ int main(int argc, char** argv) {
     std::filesystem::create_directories(o.out_dir);
     auto save = [&] {
       std::ofstream(o.out_dir + "/" + o.tag + ".json") << out.dump(2) << "\n";
-      std::ofstream(o.out_dir + "/" + o.tag + ".md") << markdown(out);
+      distband::bench::writeResultFile(o.out_dir + "/" + o.tag + ".md", markdown(out));
     };
     if (has("openvdb")) out["openvdb"] = openvdbSuite(o, verdict), save();
     if (has("table1")) out["table1"] = table1(o, verdict), save();

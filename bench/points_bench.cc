@@ -362,7 +362,7 @@ int run(const Options& o) {
   for (const std::string& r : rows) md += r + "\n";
   if (!o.out_dir.empty()) {
     fs::create_directories(o.out_dir);
-    std::ofstream(fs::path(o.out_dir) / (o.tag + ".md")) << md;
+    distband::bench::writeResultFile((fs::path(o.out_dir) / (o.tag + ".md")).string(), md);
     std::ofstream j(fs::path(o.out_dir) / (o.tag + ".json"));
     for (const std::string& line : json) j << line << "\n";
   }

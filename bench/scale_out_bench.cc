@@ -257,7 +257,7 @@ int main(int argc, char** argv) {
   emit(fmt::format("\nthreads {}, repeats {} (medians; ratio = coordinator / one server), tile voxels {}, resolution {}. "
                    "Per tile: replica-side handler seconds on 1 thread; tile-seconds: their sum per query.\n",
                    threads, repeats, tile_voxels, n));
-  if (!md_path.empty()) std::ofstream(md_path) << table;
+  if (!md_path.empty()) distband::bench::writeResultFile(md_path, table);
   fmt::print("(JSON: {})\n", json_path);
   return verdict.finish();
 }

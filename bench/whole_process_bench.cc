@@ -417,7 +417,7 @@ int main(int argc, char** argv) {
                                          sysconf(_SC_NPROCESSORS_ONLN));
   md += footer;
   std::fputs(footer.c_str(), stdout);
-  if (!tag.empty()) std::ofstream(out_dir + "/" + tag + ".md") << md;
+  if (!tag.empty()) distband::bench::writeResultFile(out_dir + "/" + tag + ".md", md);
   if (!json_path.empty()) std::ofstream(json_path) << json({{"rows", rows}}).dump(2) << "\n";
   return verdict.finish();
 }
