@@ -491,6 +491,6 @@ int main(int argc, char** argv) {
            {"reps", reps}});
     }
   }
-  if (!json_path.empty()) std::ofstream(json_path) << rows.dump(2) << "\n";
+  if (!json_path.empty()) distband::bench::writeResultFile(json_path, rows.dump(2) + "\n");
   return verdict.finish();
 }

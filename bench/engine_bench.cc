@@ -739,7 +739,7 @@ void writeOutputs(const DriverOptions& o, const std::vector<json>& rows, const j
   const std::string base = o.out_dir + "/" + o.tag;
   json out = meta;
   out["rows"] = rows;
-  std::ofstream(base + ".json") << out.dump(1) << "\n";
+  distband::bench::writeResultFile(base + ".json", out.dump(1) + "\n");
   std::string md = fmt::format("# engine_bench results ({})\n\n", o.tag);
   md += fmt::format("- date: {}\n- machine: {} ({} cores{}), load average at start: {}\n", meta["date"].get<std::string>(),
                     meta["cpu"].get<std::string>(), meta["cores"].get<int>(), ", shared with other jobs",

@@ -672,7 +672,7 @@ int main(int argc, char** argv) {
     auto has = [&](const char* s) { return std::find(o.suites.begin(), o.suites.end(), s) != o.suites.end(); };
     std::filesystem::create_directories(o.out_dir);
     auto save = [&] {
-      std::ofstream(o.out_dir + "/" + o.tag + ".json") << out.dump(2) << "\n";
+      distband::bench::writeResultFile(o.out_dir + "/" + o.tag + ".json", out.dump(2) + "\n");
       distband::bench::writeResultFile(o.out_dir + "/" + o.tag + ".md", markdown(out));
     };
     if (has("openvdb")) out["openvdb"] = openvdbSuite(o, verdict), save();

@@ -253,7 +253,7 @@ int main(int argc, char** argv) {
   } catch (const std::exception& e) {
     verdict.fail(c.name, e.what());
   }
-  std::ofstream(json_path) << out.dump(2) << "\n";
+  distband::bench::writeResultFile(json_path, out.dump(2) + "\n");
   emit(fmt::format("\nthreads {}, repeats {} (medians; ratio = coordinator / one server), tile voxels {}, resolution {}. "
                    "Per tile: replica-side handler seconds on 1 thread; tile-seconds: their sum per query.\n",
                    threads, repeats, tile_voxels, n));

@@ -245,6 +245,6 @@ int main(int argc, char** argv) {
   out["pass"] = verdict.ok();
   const std::string line = out.dump();
   fmt::print("{}\n", line);
-  if (!json_path.empty()) std::ofstream(json_path) << line << "\n";
+  if (!json_path.empty()) distband::bench::writeResultFile(json_path, line + "\n");
   return verdict.finish();
 }

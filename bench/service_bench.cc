@@ -417,6 +417,6 @@ int main(int argc, char** argv) {
     verdict.fail("service_bench", e.what());
   }
   out["pass"] = verdict.ok();
-  if (!json_path.empty()) std::ofstream(json_path) << out.dump(2) << "\n";
+  if (!json_path.empty()) distband::bench::writeResultFile(json_path, out.dump(2) + "\n");
   return verdict.finish();
 }

@@ -418,6 +418,6 @@ int main(int argc, char** argv) {
   md += footer;
   std::fputs(footer.c_str(), stdout);
   if (!tag.empty()) distband::bench::writeResultFile(out_dir + "/" + tag + ".md", md);
-  if (!json_path.empty()) std::ofstream(json_path) << json({{"rows", rows}}).dump(2) << "\n";
+  if (!json_path.empty()) distband::bench::writeResultFile(json_path, json({{"rows", rows}}).dump(2) + "\n");
   return verdict.finish();
 }
