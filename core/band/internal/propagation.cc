@@ -1,5 +1,6 @@
 #include "core/band/internal/propagation.h"
 
+#include <algorithm>
 #include <atomic>
 #include <bit>
 #include <optional>
@@ -317,6 +318,8 @@ void stepFromBand(BandState& s, bool give_back_band) {
   // Given back as it is read: block by block, each block's whole huge pages once its pushes are done (the whole band
   // beside the bricks this step makes was the band step's peak: 16 of a 512^3 teapot's 75 MiB).
   const size_t block = give_back_band ? kBandBlockVoxels : band.size();
+  const char* const data = reinterpret_cast<const char*>(band.data());
+  size_t given_back = 0;  // bytes from the band's start up to the end of the last huge page given back
   for (size_t b0 = 0; b0 < band.size(); b0 += block) {
     const size_t b1 = std::min(band.size(), b0 + block);
     tbb::parallel_for(tbb::blocked_range<size_t>(b0, b1, 1024), [&](const tbb::blocked_range<size_t>& r) {
@@ -341,8 +344,15 @@ void stepFromBand(BandState& s, bool give_back_band) {
       }
     });
     if (s.stopping()) return;
-    // [0, b1) is read: its whole huge pages go (those straddling b1 with the next block).
-    if (give_back_band) giveBackHugePages(const_cast<BandVoxel*>(band.data()), b1 * sizeof(BandVoxel));
+    // [0, b1) is read: the whole huge pages not given back yet go (the one straddling b1 with the next block).
+    if (give_back_band) {
+      const uintptr_t from = reinterpret_cast<uintptr_t>(data) + given_back;
+      const uintptr_t to = roundDownToHugePage(reinterpret_cast<uintptr_t>(data) + b1 * sizeof(BandVoxel));
+      if (to > from) {
+        giveBackHugePages(const_cast<char*>(data) + given_back, to - from);
+        given_back = to - reinterpret_cast<uintptr_t>(data);
+      }
+    }
   }
 }
 
