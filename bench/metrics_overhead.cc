@@ -25,6 +25,7 @@
 #include <grpcpp/grpcpp.h>
 #include <nlohmann/json.hpp>
 
+#include "bench/bench_util.h"
 #include "client/remote_client.h"
 #include "server/metrics.h"
 #include "tests/support/child_server.h"
@@ -33,15 +34,9 @@
 namespace distband {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t m = v.size() / 2;
-  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
-}
+using bench::Clock;
+using bench::median;
+using bench::since;
 
 class ServerProcess : public ChildServer {
  public:
@@ -280,6 +275,6 @@ int main(int argc, char** argv) {
   out["scrape_status"] = scrape.status;
   out["scrape_bytes"] = scrape.body.size();
   out["scrape_getinfo_ok"] = counted;
-  if (!json_path.empty()) std::ofstream(json_path) << out.dump(2) << "\n";
+  if (!json_path.empty()) bench::writeResultFile(json_path, out.dump(2) + "\n");
   return scrape.status == 200 && failed.load() == 0 ? 0 : 1;
 }
