@@ -361,10 +361,10 @@ int run(const Options& o) {
       o.threads, o.repeats, o.check);
   for (const std::string& r : rows) md += r + "\n";
   if (!o.out_dir.empty()) {
-    fs::create_directories(o.out_dir);
+    std::string json_lines;
+    for (const std::string& line : json) json_lines += line + "\n";
     distband::bench::writeResultFile((fs::path(o.out_dir) / (o.tag + ".md")).string(), md);
-    std::ofstream j(fs::path(o.out_dir) / (o.tag + ".json"));
-    for (const std::string& line : json) j << line << "\n";
+    distband::bench::writeResultFile((fs::path(o.out_dir) / (o.tag + ".json")).string(), json_lines);
   }
   std::printf("%s", md.c_str());
   if (failed) return 1;
