@@ -27,10 +27,11 @@ std::array<uint64_t, 3> positionBits(const Vec3d& v) {
 // Makes the faces of every edge-manifold closed component whose two faces at some edge traverse it the same way
 // consistent: breadth-first from the component's first face, a neighbour is flipped when it traverses the shared
 // edge the same way as the face reached first; then the component is flipped whole if its signed volume is negative
-// (outward). A component that cannot be made consistent (non-orientable) or had no such edge is left as it is, so a
-// consistent but inward mesh keeps today's (inverted) sign. Requires every edge to be used by exactly two triangles.
-// Returns the number of faces flipped, or -1 when interrupted (the mesh is then unspecified). Memory: 24 bytes a
-// triangle at the peak (half-edge order and mates), then 17.
+// (outward). Components are faces connected through edges of exactly two uses; one with an edge of one use or of
+// three or more (open, non-manifold), one that cannot be made consistent (non-orientable) or one that had no such
+// edge is left as it is, so a consistent but inward part keeps its (inverted) sign, and the rest of the mesh may be
+// anything. Returns the number of faces flipped, or -1 when interrupted (the mesh is then unspecified). Memory: 24
+// bytes a triangle at the peak (half-edge order and mates), then 17.
 int64_t repairOrientation(TriangleMesh* mesh, const Interrupter* interrupter) {
   auto& tris = mesh->triangles;
   const size_t nt = tris.size(), nh = 3 * nt;
@@ -38,8 +39,9 @@ int64_t repairOrientation(TriangleMesh* mesh, const Interrupter* interrupter) {
     const auto& t = tris[h / 3];
     return edgeKey(t[h % 3], t[(h % 3 + 1) % 3], false);
   };
-  // mate[h]: the other half-edge of h's edge (exactly two per edge here).
-  std::vector<uint32_t> mate(nh);
+  // mate[h]: the other half-edge of h's edge when exactly two use it, else kNoMate.
+  constexpr uint32_t kNoMate = UINT32_MAX;
+  std::vector<uint32_t> mate(nh, kNoMate);
   {
     std::vector<uint32_t> order(nh);
     std::iota(order.begin(), order.end(), 0u);
@@ -50,9 +52,14 @@ int64_t repairOrientation(TriangleMesh* mesh, const Interrupter* interrupter) {
       });
     });
     if (!sorted) return -1;
-    for (size_t i = 0; i + 1 < nh; i += 2) {
-      mate[order[i]] = order[i + 1];
-      mate[order[i + 1]] = order[i];
+    for (size_t i = 0; i < nh;) {
+      size_t j = i + 1;
+      while (j < nh && key(order[j]) == key(order[i])) ++j;
+      if (j - i == 2) {
+        mate[order[i]] = order[i + 1];
+        mate[order[i + 1]] = order[i];
+      }
+      i = j;
     }
   }
   enum : uint8_t { kVisited = 1, kFlip = 2 };
@@ -66,12 +73,16 @@ int64_t repairOrientation(TriangleMesh* mesh, const Interrupter* interrupter) {
     queue.clear();
     queue.push_back(static_cast<uint32_t>(seed));
     state[seed] = kVisited;
-    bool inconsistent = false, orientable = true;
+    bool inconsistent = false, orientable = true, closed = true;
     for (size_t q = 0; q < queue.size(); ++q) {
       if (++polled % 65536 == 0 && isInterrupted(interrupter)) return -1;
       const uint32_t u = queue[q];
       for (uint32_t e = 0; e < 3; ++e) {
         const uint32_t g = mate[3 * u + e], v = g / 3;
+        if (g == kNoMate) {
+          closed = false;
+          continue;
+        }
         // Sharing the edge, the two faces run it the same way exactly when they start it at the same vertex.
         const bool same_way = tris[u][e] == tris[v][g % 3];
         inconsistent |= same_way;
@@ -84,7 +95,7 @@ int64_t repairOrientation(TriangleMesh* mesh, const Interrupter* interrupter) {
         }
       }
     }
-    if (!inconsistent || !orientable) continue;
+    if (!inconsistent || !orientable || !closed) continue;
     // Signed volume after the traversal's flips, relative to a vertex of the component (for precision).
     const Vec3d o = mesh->vertices[tris[queue[0]][0]];
     double volume6 = 0;
@@ -193,12 +204,55 @@ int64_t findMeshParts(size_t vertex_count, const std::vector<std::array<uint32_t
 
 std::string MeshReport::summary() const {
   return fmt::format(
-      "{} vertices, {} triangles, {} degenerate skipped, {} boundary edges, {} non-manifold edges{}{}{}", vertices,
+      "{} vertices, {} triangles, {} degenerate skipped, {} boundary edges, {} non-manifold edges{}{}{}{}", vertices,
       triangles, degenerate, boundary_edges, non_manifold_edges,
       non_triangles ? fmt::format(", {} point/line primitives skipped", non_triangles) : "",
       reoriented_faces ? fmt::format(", {} faces re-oriented", reoriented_faces) : "",
+      double_sided_faces ? fmt::format(", {} double-sided faces", double_sided_faces) : "",
       components > 1 ? fmt::format(", {} parts{}", components, components_overlap ? " (bounding boxes overlap)" : "")
                      : "");
+}
+
+int64_t findDoubleSidedFaces(const std::vector<std::array<uint32_t, 3>>& triangles, std::vector<uint8_t>* twin,
+                             const Interrupter* interrupter) {
+  // Each face as its sorted corners, which way round it runs them (an even or odd permutation) and its index.
+  struct Face {
+    uint32_t a, b, c, index_and_way;  // way in bit 31
+  };
+  if (triangles.size() >= (size_t(1) << 31)) return 0;  // beyond any mesh a reader accepts
+  std::vector<Face> faces(triangles.size());
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    const auto& v = triangles[t];
+    // Sorting three items with swaps: each swap flips the permutation's parity.
+    uint32_t x = v[0], y = v[1], z = v[2], way = 0;
+    if (x > y) std::swap(x, y), way ^= 1;
+    if (y > z) std::swap(y, z), way ^= 1;
+    if (x > y) std::swap(x, y), way ^= 1;
+    faces[t] = {x, y, z, uint32_t(t) | way << 31};
+  }
+  const auto corners = [](const Face& f) { return std::array<uint32_t, 3>{f.a, f.b, f.c}; };
+  if (!runInterruptible(interrupter, [&] {
+        tbb::parallel_sort(faces.begin(), faces.end(), [&](const Face& l, const Face& r) {
+          return corners(l) != corners(r) ? corners(l) < corners(r) : l.index_and_way < r.index_and_way;
+        });
+      }))
+    return -1;
+  int64_t count = 0;
+  for (size_t i = 0; i < faces.size();) {
+    size_t j = i;
+    uint32_t ways = 0;  // bit 0: some copy runs one way, bit 1: the other
+    for (; j < faces.size() && corners(faces[j]) == corners(faces[i]); ++j)
+      ways |= 1u << (faces[j].index_and_way >> 31);
+    if (ways == 3) {
+      count += int64_t(j - i);
+      if (twin) {
+        if (twin->empty()) twin->assign(triangles.size(), 0);
+        for (size_t k = i; k < j; ++k) (*twin)[faces[k].index_and_way & 0x7FFFFFFFu] = 1;
+      }
+    }
+    i = j;
+  }
+  return count;
 }
 
 Status validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* interrupter) {
@@ -297,11 +351,15 @@ Status validateMesh(TriangleMesh* mesh, MeshReport* report, const Interrupter* i
   r.vertices = static_cast<int64_t>(vertices.size());
   r.triangles = static_cast<int64_t>(mesh->triangles.size());
   mesh->vertices = std::move(vertices);
-  // Re-orient only a closed mesh with a face patch flipped against its neighbours (the signs would otherwise flip
-  // with it); the half-edge ids must fit 32 bits.
-  if (r.closed() && same_way_edges > 0 && mesh->triangles.size() < UINT32_MAX / 3) {
+  // Re-orient the closed parts with a face patch flipped against its neighbours (the signs would otherwise flip with
+  // it), whatever the rest of the mesh is; the half-edge ids must fit 32 bits.
+  if (same_way_edges > 0 && mesh->triangles.size() < UINT32_MAX / 3) {
     r.reoriented_faces = repairOrientation(mesh, interrupter);
     if (r.reoriented_faces < 0) return interruptedStatus(interrupter);
+  }
+  if (r.closed()) {
+    r.double_sided_faces = findDoubleSidedFaces(mesh->triangles, nullptr, interrupter);
+    if (r.double_sided_faces < 0) return interruptedStatus(interrupter);
   }
   if (!findComponents(*mesh, interrupter, &r.components, &r.components_overlap)) return interruptedStatus(interrupter);
   if (report) {

@@ -39,6 +39,10 @@ struct MeshReport {
   int64_t boundary_edges = 0;      ///< edges used by exactly one kept triangle (0 for a closed mesh)
   int64_t non_manifold_edges = 0;  ///< edges used by more than two kept triangles
   int64_t reoriented_faces = 0;    ///< faces flipped to make closed components consistent and outward
+  /// Faces listed twice over the same corners, once each way round (a double-sided sheet), counted on a closed mesh
+  /// only: there they make an edge-closed part of no volume, which no pseudonormal signs right (`auto` then takes
+  /// the winding number, in which the two cancel).
+  int64_t double_sided_faces = 0;
   int64_t components = 0;          ///< connected parts (triangles sharing a vertex are connected)
   bool components_overlap = false;  ///< the bounding boxes of some two parts intersect (touching counts)
   Vec3d bbox_min, bbox_max;        ///< world bounding box of the kept triangles' vertices
@@ -62,6 +66,13 @@ inline uint64_t edgeKey(uint64_t a, uint64_t b, bool directed) {
 /// part of its own), and returns the number of parts, or -1 when `interrupter` stopped it. Memory: `part` alone.
 int64_t findMeshParts(size_t vertex_count, const std::vector<std::array<uint32_t, 3>>& triangles,
                       std::vector<uint32_t>* part, const Interrupter* interrupter = nullptr);
+
+/// The triangles listed again over the same three corners the other way round (a double-sided sheet: their solid
+/// angles cancel, and each is the other's nearest triangle everywhere): every copy of such a corner set, whichever way
+/// it runs, gets (*twin)[t] = 1 when `twin` is not null. Returns how many, or -1 when `interrupter` stopped it; `twin`
+/// is left empty when there are none. O(T log T), in parallel; 16 bytes a triangle while it runs.
+int64_t findDoubleSidedFaces(const std::vector<std::array<uint32_t, 3>>& triangles, std::vector<uint8_t>* twin,
+                             const Interrupter* interrupter = nullptr);
 
 /// The largest mesh file loadMesh reads (a local file: the CLI, benches and tests; the server never reads files).
 inline constexpr uint64_t kMaxMeshFileBytes = uint64_t(4) << 30;

@@ -48,9 +48,17 @@ SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std
   }
   // Closed parts that cross or nest break the pseudonormal test (a point inside one part whose closest triangle is
   // another's takes that triangle's side); disjoint bounding boxes rule both out, cheaply.
-  if (report.closed() && !report.components_overlap) {
+  if (report.closed() && !report.components_overlap && report.double_sided_faces == 0) {
     if (reason) *reason = "auto: the mesh is closed";
     return SignMethod::kPseudonormal;
+  }
+  // A face listed again the other way round closes its edges without enclosing anything: either copy's pseudonormal
+  // puts one side inside, where the winding number (in which the two cancel) has 0.
+  if (report.closed() && report.double_sided_faces > 0) {
+    if (reason)
+      *reason = fmt::format("auto: the mesh is closed but {} faces are double-sided (listed twice, once each way)",
+                            report.double_sided_faces);
+    return SignMethod::kWinding;
   }
   if (report.closed()) {
     if (reason)
@@ -274,6 +282,7 @@ struct MeshSign::Tables {
   std::span<const Vec3d> verts;                      // the caller's frame
   std::span<const std::array<uint32_t, 3>> corners;  // mesh vertex ids
   std::vector<Normal3f> face_n, vertex_n;            // pseudonormals
+  std::vector<uint8_t> double_sided;                 // winding: 1 for a face listed again the other way (or empty)
   /// Edge pseudonormals, through each half-edge's (3 per triangle) other triangle: a manifold edge's normal is computed
   /// where needed from its two faces (4 bytes a half-edge where a float normal took 12: a third of a big mesh's sign
   /// tables). kLoneEdge: a boundary edge (its face's normal); kManyUses: an edge of three or more uses, or used twice
@@ -544,8 +553,10 @@ void MeshSign::Tables::signByPseudonormal(Brick& brick, const BrickMask& subset,
 // takes a winding query per voxel. The margins cover the turn of the winding number around the boundary curves
 // across the brick and the hierarchy's error. Sheets of two connected parts in one brick (parts that cross, or nest
 // with the same orientation: a voxel in front of one sheet can lie behind the other, which no single w0 describes)
-// also send the brick to the per-voxel queries. Not covered: one connected part that crosses itself, or stacks two
-// sheets of the same orientation, within a brick.
+// also send the brick to the per-voxel queries, as do double-sided faces (a face listed again the other way round:
+// the copies' solid angles cancel, so w does not jump across them, yet either copy's pseudonormal has a side). The
+// reference is a voxel off the sheets: on one, w is either side's value or their mean, and the jump says nothing.
+// Not covered: one connected part that crosses itself, or stacks two sheets of the same orientation, within a brick.
 bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subset, const Vec3d& center, double radius,
                                             const seeds_internal::BoundaryCurves::Near& near, const uint32_t* sites,
                                             const uint32_t* site_triangle, double voxel_size, const Vec3d& scale,
@@ -586,11 +597,14 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
       const Vec3d tn{face_n[t].x, face_n[t].y, face_n[t].z};
       if (last == kNoSite) normal = tn, brick_part = part.empty() ? 0 : part[t];
       if (normal.dot(tn) <= 0) return false;                     // thin parts: opposite sheets in one brick
+      if (!double_sided.empty() && double_sided[t]) return false;  // its copy the other way round cancels it
       if (!part.empty() && part[t] != brick_part) return false;  // sheets of two parts
       last = t;
     }
+    // The reference lies off the sheets: on one, its value is either side's (or their mean, to within the query's
+    // error), and which side's says nothing of the jump.
     const double c2 = from_center.distance2(i);
-    if (c2 < ref_to_center) ref_to_center = c2, ref = i;
+    if (c2 < ref_to_center && !onSheet(std::abs(brick.values[i]) / voxel_size)) ref_to_center = c2, ref = i;
     return true;
   });
   if (!one_sheet || ref < 0) return false;
@@ -631,9 +645,7 @@ bool MeshSign::Tables::signWindingCertified(Brick& brick, const BrickMask& subse
   const double w0 = value.w - jump;
   const bool front_inside = w0 > 0.5, behind_inside = w0 > -0.5;
   if (front_inside == behind_inside) {  // one side of 1/2 throughout
-    // ... read off the sheet: on it the value is one side's or the other's, and the pseudonormal's side says
-    // nothing (w0 would be off by the jump). Voxels on a sheet take the outside, as in signBrick.
-    if (onSheet(std::abs(brick.values[ref]) / voxel_size)) return false;
+    // Voxels on a sheet take the outside, as in signBrick.
     if (front_inside)
       subset.forEach([&](int i) {
         if (!onSheet(std::abs(brick.values[i]) / voxel_size)) brick.values[i] = -std::abs(brick.values[i]);
@@ -699,6 +711,7 @@ Status MeshSign::build(std::shared_ptr<const std::vector<Vec3d>> vertices,
         for (size_t t = 0; t < c.size(); ++t) tables.part[t] = vertex_part[c[t][0]];
       }
       std::vector<uint32_t>().swap(vertex_part);
+      if (findDoubleSidedFaces(c, &tables.double_sided, interrupter) < 0) return interrupter->status();
       if (!isInterrupted(interrupter))
         tables.winding = std::make_unique<WindingNumber>(std::move(tris), 2.0, interrupter);
       // The certificate that signs most bricks with one query (signWindingCertified) reads pseudonormals and the
@@ -890,7 +903,7 @@ uint64_t MeshSign::memoryBytes() const {
                    t.corners.size() * sizeof(t.corners[0]) +
                    (t.face_n.capacity() + t.vertex_n.capacity()) * sizeof(Normal3f) +
                    t.edge_mate.capacity() * sizeof(uint32_t) + t.shared_edge_n.capacity() * sizeof(t.shared_edge_n[0]) +
-                   t.boundary.memoryBytes() + t.part.capacity() * sizeof(uint32_t);
+                   t.boundary.memoryBytes() + t.part.capacity() * sizeof(uint32_t) + t.double_sided.capacity();
   if (t.winding) bytes += t.winding->memoryBytes();
   if (t.fans) bytes += t.fans->memoryBytes();
   if (t.parity) bytes += estimateBytes(SignMethod::kParity, 0, t.triangles);
@@ -909,8 +922,9 @@ uint64_t MeshSign::estimateBytes(SignMethod method, uint64_t vertices, uint64_t 
       // The mesh's winding tree, with each triangle's part; then each edge use's key (the boundary chain), the
       // boundary fans' tree, at most one fan triangle per kMaxFansPerTriangle, and the boundary's pieces, each in a
       // cell of its own at worst.
-      return WindingNumber::estimateBytes(triangles) + triangles * sizeof(uint32_t) + triangles * 3 * sizeof(uint64_t) +
-             WindingNumber::estimateBytes(triangles / kMaxFansPerTriangle + 1) + maxBoundaryPieceBytes(triangles);
+      return WindingNumber::estimateBytes(triangles) + triangles * (sizeof(uint32_t) + 1) +
+             triangles * 3 * sizeof(uint64_t) + WindingNumber::estimateBytes(triangles / kMaxFansPerTriangle + 1) +
+             maxBoundaryPieceBytes(triangles);
     }
     case SignMethod::kParity:
       // Embree's float vertices, indices and BVH (a generous 3x the buffers), and the triangles it is built from.
