@@ -8,7 +8,6 @@
 #include <tbb/global_control.h>
 
 #include "client/interrupt_watch.h"
-#include "core/io/npy.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/points/point_plan.h"
 
@@ -54,13 +53,17 @@ int runInProcess(const AtArgs& a, const CliContext& ctx) {
     source.mesh = &mesh;
     seeds = fmt::format("mesh {} ({})", spec.source, report.summary());
   } else if (spec.seeds == SeedKind::kVolume) {
-    LabelVolume volume;
-    if (Status s = readNpyVolume(spec.source, &volume); !s.ok()) return usage(ctx, s.message());
-    const Coord dims = volume.dims();
-    source.mask = volume.seedMask();
-    source.lattice = Grid(spec.grid.origin, spec.grid.voxel_size, dims);
-    seeds =
-        fmt::format("volume {} ({}x{}x{}, voxel size {:g})", spec.source, dims.x, dims.y, dims.z, spec.grid.voxel_size);
+    VolumeImage image;
+    if (Status s = readVolumeFile(spec.source, {}, &image); !s.ok()) return usage(ctx, s.message());
+    const Coord dims = image.volume.dims();
+    if (std::string e = checkMaskDims(spec, dims); !e.empty()) return usage(ctx, e);
+    const VolumeGeometry geometry = overrideGeometry(image.geometry, spec.grid.spacing, spec.grid.origin_given);
+    double h = 0;
+    if (std::string e = cubicVolumeLattice(geometry, spec.source, &h); !e.empty()) return usage(ctx, e);
+    source.mask = image.volume.seedMask();
+    source.lattice = Grid(geometry.origin, h, dims);
+    seeds = fmt::format("volume {} ({}x{}x{}, voxel size {:g}, origin ({:g}, {:g}, {:g}))", spec.source, dims.x, dims.y,
+                        dims.z, h, geometry.origin.x, geometry.origin.y, geometry.origin.z);
   } else {
     source.points = &spec.points;
     seeds = fmt::format("{} seed point{}", spec.points.size(), spec.points.size() == 1 ? "" : "s");
@@ -130,6 +133,22 @@ int runInProcess(const AtArgs& a, const CliContext& ctx) {
 }
 
 }  // namespace
+
+std::string cubicVolumeLattice(const VolumeGeometry& geometry, const std::string& source, double* h) {
+  const Vec3d& s = geometry.spacing;
+  if (!(s.x == s.y && s.y == s.z))
+    return fmt::format(
+        "--volume {}: its spacing ({:g}, {:g}, {:g}) is anisotropic; `distband at` takes cubic voxels only (give "
+        "--voxel-size H to place them on a cubic lattice; compute and query take any spacing)",
+        source, s.x, s.y, s.z);
+  if (geometry.reoriented)
+    return fmt::format(
+        "--volume {}: its header's axes are flipped or permuted against the array's; `distband at` places voxel "
+        "(i, j, k) at origin + h * (i, j, k) only (compute and query take such files)",
+        source);
+  *h = s.x;
+  return {};
+}
 
 std::string checkAtFlags(const AtArgs& a, bool remote, AtSetup* setup) {
   AtSetup s;

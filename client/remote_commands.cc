@@ -630,9 +630,12 @@ int runRemoteAt(const AtArgs& a, const ConnectionArgs& connection_args, const Cl
   } else {
     header.set_asset_id(uploaded.asset_id());
   }
-  if (spec.seeds == SeedKind::kVolume) {
-    if (spec.grid.lattice) setVec(header.mutable_volume_origin(), spec.grid.origin);
-    if (spec.grid.voxel_size > 0) header.set_volume_voxel_size(spec.grid.voxel_size);
+  if (spec.seeds == SeedKind::kVolume && !spec.asset) {
+    // The uploaded file's lattice (its header under the flags), as the in-process run takes it.
+    double h = 0;
+    if (std::string e = cubicVolumeLattice(upload.geometry, spec.source, &h); !e.empty()) return usage(e);
+    setVec(header.mutable_volume_origin(), upload.geometry.origin);
+    header.set_volume_voxel_size(h);
   }
   const FieldRequest& f = spec.request;
   v1::SignMode sign = v1::SIGN_MODE_UNSPECIFIED;

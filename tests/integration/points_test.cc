@@ -487,5 +487,59 @@ TEST(PointsTest, SeedPointFilesGiveTheFieldOfTheSamePointsInline) {
   EXPECT_EQ(readFile(f.path("a1.npy")), readFile(f.path("a2.npy")));
 }
 
+// A seed volume's lattice for `at`: its file's header (an NRRD with spacing 2 and origin (10, 20, 30)) or the flags
+// (a .npy with --voxel-size and --origin), in-process and through the server, exact against brute force over the seed
+// voxels' centres. Until 2026-11-29 `at` read .npy volumes only, ignored --spacing, and sent the server no header
+// geometry. An anisotropic spacing, which the point search does not take yet, is refused naming --volume.
+TEST(PointsTest, AtPlacesAVolumeOnItsHeadersLatticeOrTheFlags) {
+  TestServer server;
+  CliFixture f;
+  const Coord dims{6, 5, 4};
+  std::vector<uint8_t> mask(size_t(dims.x * dims.y * dims.z), 0);
+  const std::vector<Coord> seeds = {{3, 2, 1}, {0, 4, 3}, {5, 0, 0}};
+  for (const Coord& c : seeds) mask[size_t((c.z * dims.y + c.y) * dims.x + c.x)] = 1;
+  const double h = 2;
+  const Vec3d origin{10, 20, 30};
+  std::ofstream(f.path("v.nrrd"), std::ios::binary)
+      << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 6 5 4\nspace dimension: 3\n"
+         "space directions: (2,0,0) (0,2,0) (0,0,2)\nspace origin: (10,20,30)\nencoding: raw\nendian: little\n\n"
+      << std::string(mask.begin(), mask.end());
+  std::ofstream(f.path("v.npy"), std::ios::binary)
+      << encodeNpy("|u1", {dims.z, dims.y, dims.x}, mask.data(), mask.size());
+  // Seed centres, points around them, and far ones.
+  std::vector<Vec3d> at = {origin + Vec3d{6, 4, 2}, origin + Vec3d{1, 0, 0}, {0, 0, 0}, {17.5, 29, 36.25}};
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-4, 16);
+  for (int i = 0; i < 60; ++i) at.push_back(origin + Vec3d{u(rng), u(rng), u(rng)});
+  std::ofstream(f.path("q.npy"), std::ios::binary) << npyPoints(at);
+  auto check = [&](const std::vector<std::string>& seed_flags, bool remote) {
+    std::vector<std::string> args = {"at"};
+    args.insert(args.end(), seed_flags.begin(), seed_flags.end());
+    args.insert(args.end(), {"--at", f.path("q.npy"), "--out", f.path("d.npy")});
+    if (remote) args.insert(args.end(), {"--server", server.target()});
+    ASSERT_EQ(f.run(args), 0) << f.err.str() << f.out.str();
+    const auto d = readNpyAs<double>(f.path("d.npy"), "<f8");
+    ASSERT_EQ(d.size(), at.size());
+    for (size_t i = 0; i < at.size(); ++i) {
+      double best = INFINITY;
+      for (const Coord& c : seeds)
+        best = std::min(best, (at[i] - (origin + Vec3d{c.x * h, c.y * h, c.z * h})).length());
+      EXPECT_NEAR(d[i], best, 1e-9) << "point " << i << (remote ? " (server) " : " ") << seed_flags[1];
+    }
+  };
+  for (const bool remote : {false, true}) {
+    check({"--volume", f.path("v.nrrd")}, remote);
+    check({"--volume", f.path("v.npy"), "--voxel-size", "2", "--origin", "10,20,30"}, remote);
+    check({"--volume", f.path("v.npy"), "--spacing", "2,2,2", "--origin", "10,20,30"}, remote);
+    std::vector<std::string> args = {"at",   "--volume",      f.path("v.nrrd"), "--spacing",    "1,2,3",
+                                     "--at", f.path("q.npy"), "--out",          f.path("d.npy")};
+    if (remote) args.insert(args.end(), {"--server", server.target()});
+    EXPECT_EQ(f.run(args), 2);
+    EXPECT_NE(f.err.str().find("--volume " + f.path("v.nrrd") + ": its spacing (1, 2, 3) is anisotropic"),
+              std::string::npos)
+        << f.err.str();
+  }
+}
+
 }  // namespace
 }  // namespace distband
