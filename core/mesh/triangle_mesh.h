@@ -41,7 +41,8 @@ struct MeshReport {
   int64_t reoriented_faces = 0;    ///< faces flipped to make closed components consistent and outward
   /// Faces listed twice over the same corners, once each way round (a double-sided sheet), counted on a closed mesh
   /// only: there they make an edge-closed part of no volume, which no pseudonormal signs right (`auto` then takes
-  /// the winding number, in which the two cancel).
+  /// the winding number, in which the two cancel). Looked for where a vertex has only two faces: a pair whose three
+  /// corners are each pinched to other faces is not counted.
   int64_t double_sided_faces = 0;
   int64_t components = 0;          ///< connected parts (triangles sharing a vertex are connected)
   bool components_overlap = false;  ///< the bounding boxes of some two parts intersect (touching counts)
