@@ -4,12 +4,15 @@
 //   * PointSearch names the structures a query searches, each built once per seed set and shared (a server keeps them
 //     with the cached asset): a mesh's TriangleBvh with its MeshSign (null: unsigned), a PointSet of seed points, a
 //     VolumeSearch of a seed volume.
-//   * Meshes: the exact distance to the closest triangle (lowest index among equally near ones), signed by the sign
-//     method in force — the same MeshSign test the grid path signs its voxels with, so a voxel centre gets the grid's
-//     sign. Points farther than the limit have no closest triangle: they are signed by `far_sign` (the winding number;
-//     a closed mesh's pseudonormal sign and its winding number agree away from the surface), or by `sign` itself when
-//     it needs no closest triangle (winding, parity).
-//   * Point seeds: the exact distance to the nearest seed point (lowest index among equally near ones), unsigned.
+//   * Meshes: the exact distance to the closest triangle (lowest index among those at the same computed distance),
+//     signed by the sign method in force — the same MeshSign test the grid path signs its voxels with, so a voxel
+//     centre gets the grid's sign. Points farther than the limit have no closest triangle: they are signed by
+//     `far_sign` (the winding number; a closed mesh's pseudonormal sign and its winding number agree away from the
+//     surface), or by `sign` itself when it needs no closest triangle (winding, parity).
+//   * Point seeds: the exact distance to the nearest seed point (lowest index among those at the same computed
+//     distance), unsigned. Ties are of the computed doubles: triangles sharing the closest vertex or edge, or points
+//     equally far in real arithmetic, may differ in the last bit, and the nearer by rounding is reported (the same
+//     one for every thread count, chunking and order of the query points).
 //   * Volumes: VolumeSearch's distance to the nearest seed voxel centre, signed when the volume is (mask-inside).
 //   * Per point, within the limit: distance (world units, negative inside); closest point; feature id (the triangle,
 //     seed point or seed voxel's linear index); gradient = the unit vector from the closest point to the point, times

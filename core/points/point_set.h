@@ -4,8 +4,8 @@
 //   * build() takes the points (finite, world units) and an id per point (empty: the point's index) and polls
 //     `interrupter`.
 //   * nearest() finds the point nearest p within sqrt(limit2) (+infinity: anywhere): its id, the exact squared
-//     distance (computed in double from the coordinates) and the point; among equally near points the lowest id.
-//     False when none lies within the limit.
+//     distance (computed in double from the coordinates) and the point; among points at the same computed distance
+//     the lowest id. False when none lies within the limit.
 // Immutable once built; nearest() is thread-safe.
 #pragma once
 

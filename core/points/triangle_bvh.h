@@ -4,7 +4,8 @@
 //   * build() keeps the triangles' corners in leaf order (double, as the mesh holds them) and polls `interrupter`.
 //   * closest() finds the triangle nearest p within sqrt(limit2) (+infinity: anywhere): its index in the mesh, the
 //     exact squared distance and the closest point (core/geometry.h's point–triangle routine, the one the grid path's
-//     triangle sites use); among equally near triangles the lowest index. False when none lies within the limit.
+//     triangle sites use); among triangles at the same computed distance the lowest index (those sharing the
+//     closest vertex or edge may differ in the last bit). False when none lies within the limit.
 //   * A near p costs O(log T) box tests and a few triangle tests; a p farther than the limit from the mesh's box
 //     costs one box test.
 // Immutable once built; closest() is thread-safe.
