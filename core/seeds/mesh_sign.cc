@@ -46,25 +46,25 @@ SignMethod resolveSignMethod(SignMethod requested, const MeshReport& report, std
     if (reason) *reason = "requested";
     return requested;
   }
-  // Closed parts that cross or nest break the pseudonormal test (a point inside one part whose closest triangle is
-  // another's takes that triangle's side); disjoint bounding boxes rule both out, cheaply.
-  if (report.closed() && !report.components_overlap && report.double_sided_faces == 0) {
+  if (report.closed()) {
+    // A face listed again the other way round closes its edges without enclosing anything: either copy's
+    // pseudonormal puts one side inside, where the winding number (in which the two cancel) has 0.
+    if (report.double_sided_faces > 0) {
+      if (reason)
+        *reason = fmt::format("auto: the mesh is closed but {} faces are double-sided (listed twice, once each way)",
+                              report.double_sided_faces);
+      return SignMethod::kWinding;
+    }
+    // Closed parts that cross or nest break the pseudonormal test (a point inside one part whose closest triangle is
+    // another's takes that triangle's side); disjoint bounding boxes rule both out, cheaply.
+    if (report.components_overlap) {
+      if (reason)
+        *reason = fmt::format("auto: the mesh is closed but its parts overlap ({} parts, bounding boxes intersect)",
+                              report.components);
+      return SignMethod::kWinding;
+    }
     if (reason) *reason = "auto: the mesh is closed";
     return SignMethod::kPseudonormal;
-  }
-  // A face listed again the other way round closes its edges without enclosing anything: either copy's pseudonormal
-  // puts one side inside, where the winding number (in which the two cancel) has 0.
-  if (report.closed() && report.double_sided_faces > 0) {
-    if (reason)
-      *reason = fmt::format("auto: the mesh is closed but {} faces are double-sided (listed twice, once each way)",
-                            report.double_sided_faces);
-    return SignMethod::kWinding;
-  }
-  if (report.closed()) {
-    if (reason)
-      *reason = fmt::format("auto: the mesh is closed but its parts overlap ({} parts, bounding boxes intersect)",
-                            report.components);
-    return SignMethod::kWinding;
   }
   if (reason) {
     std::string edges;
